@@ -1,0 +1,40 @@
+# rmbuild developer entry points. Everything runs from a local .venv built from the package registries.
+PY ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+RUN_DIR ?= runs/default
+PRESET ?= default
+SEED ?= 7
+
+.PHONY: venv run test bench lint clean
+
+$(BIN)/python:
+	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+
+$(STAMP): $(BIN)/python pyproject.toml
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+## make run: the whole pipeline on the embedded synthetic venue; prints where the results are
+run: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m rmbuild.pipeline_demo --out $(RUN_DIR) --preset $(PRESET) --seed $(SEED)
+
+## make test: ruff + the pytest suite
+test: $(STAMP)
+	$(BIN)/ruff check rmbuild tests bench
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -x --durations=10
+
+## make bench: benchmarks; figures go to bench/results/*.json and bench/results/SUMMARY.md
+bench: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
+
+lint: $(STAMP)
+	$(BIN)/ruff check rmbuild tests bench
+
+clean:
+	rm -rf runs .pytest_cache

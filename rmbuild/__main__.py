@@ -1,0 +1,3 @@
+from rmbuild.cli import main
+
+main()

@@ -1,0 +1,104 @@
+"""The `rmbuild` command line: a click group whose commands are loaded lazily (fast --help).
+
+Each command lives in its own thin module; this module maps the project's errors to a one-line message
+and an exit code (2 bad input/usage, 1 other failures).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+
+import click
+
+#: command name -> "module:attribute"
+COMMANDS = {
+    "simulate": "rmbuild.cli.simulate:simulate",
+    "ingest": "rmbuild.cli.ingest:ingest",
+    "optimize": "rmbuild.cli.optimize:optimize",
+    "export-map": "rmbuild.cli.export_map:export_map",
+    "evaluate": "rmbuild.cli.evaluate:evaluate",
+    "view": "rmbuild.cli.view:view",
+    "report": "rmbuild.cli.report:report",
+}
+
+#: one-line summaries shown by `rmbuild --help` without importing the commands
+SUMMARIES = {
+    "simulate": "Write a seeded synthetic venue (input files + truth/).",
+    "ingest": "Read walks and Wi-Fi scans, validate them, create a workspace.",
+    "optimize": "Align all walks in one frame with a GTSAM factor graph.",
+    "export-map": "Rasterise the aligned fingerprints into a radio map.",
+    "evaluate": "Localize held-out walks with built, surveyed and raw maps.",
+    "view": "Log a workspace to the rerun viewer.",
+    "report": "Write a one-page HTML report of a workspace.",
+}
+
+
+class LazyGroup(click.Group):
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return [name for name in COMMANDS if self._available(name)]
+
+    @staticmethod
+    def _available(name: str) -> bool:
+        mod = COMMANDS[name].split(":")[0]
+        return importlib.util.find_spec(mod) is not None
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS or not self._available(name):
+            return None
+        mod, attr = COMMANDS[name].split(":")
+        return getattr(importlib.import_module(mod), attr)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(n, SUMMARIES.get(n, "")) for n in self.list_commands(ctx)]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="rmbuild")
+def cli() -> None:
+    """rmbuild: offline graph-SLAM radio-map builder.
+
+    Typical run: simulate (or bring your own walks) -> ingest -> optimize -> export-map -> evaluate.
+    """
+
+
+def setup_logging(verbose: int, quiet: bool) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
+    if verbose == 0 and not quiet:
+        level = logging.WARNING
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    root = logging.getLogger("rmbuild")
+    root.handlers[:] = [handler]
+    root.setLevel(logging.INFO if verbose == 1 else level)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the console script: runs the group, turns errors into one line + exit code."""
+    from rmbuild.errors import RmbuildError
+
+    try:
+        cli.main(args=argv, prog_name="rmbuild", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(2 if e.exit_code in (1, 2) else e.exit_code)
+    except RmbuildError as e:
+        click.echo(f"error: {e}", err=True)
+        sys.exit(e.exit_code)
+    except KeyboardInterrupt:
+        click.echo("interrupted; no partial outputs were kept", err=True)
+        sys.exit(130)
+    except Exception as e:  # an internal failure: one line, the traceback only with -v
+        args = sys.argv[1:] if argv is None else argv
+        if any(a in ("-v", "-vv", "--verbose") for a in args):
+            raise
+        click.echo(f"internal error: {type(e).__name__}: {e} (re-run with -v for the traceback)", err=True)
+        sys.exit(1)
+    sys.exit(0)

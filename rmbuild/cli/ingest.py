@@ -1,0 +1,35 @@
+"""`rmbuild ingest`."""
+
+from __future__ import annotations
+
+import click
+
+from rmbuild.cli.options import common_options, start, workspace_option
+
+
+@click.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@workspace_option
+@click.option("--format", "fmt", default=None,
+              help="Input format (default: recognised from the files). Formats: rmbuild, msft-ilc, ipin.")
+@common_options
+def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
+    """Read INPUTS (files or directories), validate them and create the workspace."""
+    start(verbose, quiet)
+    from rmbuild.cli.progress import progress_display
+    from rmbuild.config import load_stage_config
+    from rmbuild.stages import ingest as stage
+
+    cfg = load_stage_config("ingest", config_path)
+    with progress_display(quiet) as progress:
+        s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress)
+    if not quiet:
+        skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
+        click.echo(
+            f"ingested {s['walks']} walks, {s['poses']} poses, {s['readings']} readings "
+            f"in {s['scans']} scans "
+            f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes) -> {workspace}"
+            + (f"; skipped {skipped}" if skipped else "")
+        )
+        for w in s["warnings"]:
+            click.echo(f"warning: {w}", err=True)

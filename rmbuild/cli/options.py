@@ -1,0 +1,32 @@
+"""Options shared by every stage command."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+from rmbuild.cli import setup_logging
+
+
+def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """--config, --force, --quiet, -v; sets up logging before the command body runs."""
+    f = click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress or tables.")(f)
+    f = click.option("--force", is_flag=True, help="Replace existing outputs.")(f)
+    f = click.option(
+        "--config", "config_path", type=click.Path(dir_okay=False), default=None,
+        help="TOML file with a table per stage ([ingest], [optimize], ...); unknown keys are errors.",
+    )(f)
+    return f
+
+
+def start(verbose: int, quiet: bool) -> None:
+    setup_logging(verbose, quiet)
+
+
+workspace_option = click.option(
+    "-w", "--workspace", required=True, type=click.Path(file_okay=False),
+    help="Workspace directory (created by `rmbuild ingest`).",
+)

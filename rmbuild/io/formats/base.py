@@ -1,0 +1,83 @@
+"""The reader interface: every input format is one :class:`Reader` subclass in the registry.
+
+A reader turns user files into a :class:`RawInput` — tables in the *input schema* documented in
+``docs/data-format.md`` — and nothing more. Validation of values that every format shares, integration of
+step increments and attachment of Wi-Fi readings to pose nodes happen afterwards in
+:mod:`rmbuild.ingest_core`, so all formats get the same checks.
+
+Contract for ``Reader.read``:
+- ``poses``: walk_id (str), t_s (float s), x_m, y_m, heading_rad — per-step poses in the walk's own frame;
+  optional yaw_abs_rad, yaw_abs_sigma_rad, step_freq_hz. (Our own schema may instead carry step
+  increments; its reader integrates them.)
+- ``wifi``: walk_id, t_s, bssid (str), rssi_dbm (float); optional freq_mhz, ssid.
+- ``fixes``: walk_id, t_s, x_m, y_m, label — ground truth / landmark fixes (may be empty).
+- ``walks``: walk_id, device_id, user_id, role, source.
+- A problem in a file raises :class:`rmbuild.errors.InputError` naming file and line/row. Lines of a
+  known-but-unused kind are counted in ``skipped`` (kind -> count), not errors.
+- ``where`` maps each table to a callable giving "file:row" for a row position, so shared validation can
+  name the source of a bad value.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+import pandas as pd
+
+from rmbuild.config.ingest import IngestConfig
+
+
+@dataclass
+class RawInput:
+    """Tables read from user files, before shared validation and attachment."""
+
+    walks: pd.DataFrame
+    poses: pd.DataFrame
+    wifi: pd.DataFrame
+    fixes: pd.DataFrame
+    truth_poses: pd.DataFrame | None = None
+    truth_aps: pd.DataFrame | None = None
+    venue: dict | None = None
+    #: other truth tables (name -> DataFrame), kept in the workspace's truth/ folder as they are
+    truth_extra: dict[str, pd.DataFrame] = field(default_factory=dict)
+    #: line/record kind -> count of skipped items (reported as a warning, not an error)
+    skipped: dict[str, int] = field(default_factory=dict)
+    #: human-readable notes for the ingest report (e.g. "dropped 1,234 stale Wi-Fi rows")
+    notes: list[str] = field(default_factory=list)
+    #: table name -> function(row position) -> "file:line" for error messages
+    where: dict[str, Callable[[int], str]] = field(default_factory=dict)
+
+
+class Reader(ABC):
+    """One input format. Subclasses set ``name`` and ``description`` and implement the two methods."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+
+    @classmethod
+    @abstractmethod
+    def sniff(cls, files: list[Path]) -> bool:
+        """True when ``files`` (regular files, already expanded from directories) look like this format.
+
+        Must be cheap: look at names and at most the first few lines.
+        """
+
+    @abstractmethod
+    def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
+        """Read ``files`` into a :class:`RawInput`; raise InputError (file + line) on malformed input."""
+
+
+#: format name -> reader class; filled by :mod:`rmbuild.io.formats`
+REGISTRY: dict[str, type[Reader]] = {}
+
+
+def register(cls: type[Reader]) -> type[Reader]:
+    """Class decorator adding a reader to :data:`REGISTRY` under ``cls.name``."""
+    if cls.name in REGISTRY:
+        raise RuntimeError(f"duplicate reader name {cls.name!r}")
+    REGISTRY[cls.name] = cls
+    return cls

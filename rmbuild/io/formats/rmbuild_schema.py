@@ -1,0 +1,264 @@
+"""rmbuild's own input schema: CSV (optionally gzip'd) or Parquet tables, documented in docs/data-format.md.
+
+Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``fixes*`` (``.csv``, ``.csv.gz`` or
+``.parquet``), and inside a ``truth/`` folder ``poses*``, ``aps*``, ``walks*``, ``devices*``, ``users*``,
+``landmarks*`` and ``venue.json``. Several files of one table are concatenated.
+"""
+
+from __future__ import annotations
+
+import difflib
+import gzip
+import json
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.ingest import IngestConfig
+from rmbuild.errors import InputError
+from rmbuild.io.formats.base import RawInput, Reader, register
+
+TABLES = ("walks", "poses", "wifi", "fixes")
+TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks")
+SUFFIXES = (".csv", ".csv.gz", ".parquet")
+
+# column -> kind ("str" | "num"); required and optional columns per table
+POSE_ABS = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num", "heading_rad": "num"}
+POSE_INC = {"walk_id": "str", "t_s": "num", "step_length_m": "num", "dheading_rad": "num"}
+POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "num"}
+SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
+    "walks": ({"walk_id": "str"}, {"device_id": "str", "user_id": "str", "role": "str"}),
+    "wifi": (
+        {"walk_id": "str", "t_s": "num", "bssid": "str", "rssi_dbm": "num"},
+        {"freq_mhz": "num", "ssid": "str"},
+    ),
+    "fixes": ({"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num"}, {"label": "str"}),
+    "truth/poses": ({"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num", "heading_rad": "num"}, {}),
+}
+#: optional numeric columns where an empty cell / NaN is allowed (means "not available")
+NULLABLE = {"yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz", "freq_mhz"}
+ROLES = ("", "map", "test")
+
+
+def _suffix(p: Path) -> str | None:
+    name = p.name.lower()
+    for s in SUFFIXES:
+        if name.endswith(s):
+            return s
+    return None
+
+
+def _table_of(p: Path) -> str | None:
+    """'poses', 'truth/aps', 'truth/venue', ... or None when the file is not part of the schema."""
+    in_truth = p.parent.name == "truth"
+    if in_truth and p.name == "venue.json":
+        return "truth/venue"
+    if _suffix(p) is None:
+        return None
+    stem = p.name.lower()
+    for t in TRUTH_TABLES if in_truth else TABLES:
+        if stem.startswith(t):
+            return f"truth/{t}" if in_truth else t
+    return None
+
+
+class _Located:
+    """A table read from one file with a way to name its rows: 'file:line' (CSV) or 'file:row N'."""
+
+    def __init__(self, path: Path, df: pd.DataFrame) -> None:
+        self.path = path
+        self.df = df
+        self.csv = _suffix(path) != ".parquet"
+
+    def where(self, i: int) -> str:
+        return f"{self.path}:{i + 2}" if self.csv else f"{self.path}:row {i + 1}"
+
+
+def _read_file(path: Path) -> pd.DataFrame:
+    try:
+        if _suffix(path) == ".parquet":
+            return pd.read_parquet(path)
+        return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""])
+    except pd.errors.EmptyDataError:
+        raise InputError("empty file (no header)", str(path)) from None
+    except pd.errors.ParserError as e:
+        raise InputError(f"malformed CSV ({str(e).splitlines()[0]})", str(path)) from None
+    except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as e:
+        kind = "gzip" if str(path).endswith(".gz") else "file"
+        raise InputError(f"unreadable {kind} ({type(e).__name__}: {e})", str(path)) from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", str(path)) from None
+    except Exception as e:  # pyarrow raises ArrowInvalid and friends for corrupt Parquet
+        raise InputError(f"unreadable Parquet ({type(e).__name__}: {e})", str(path)) from None
+
+
+def _check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
+    cols = [str(c) for c in loc.df.columns]
+    known = list(required) + list(optional)
+    for c in cols:
+        if c not in known:
+            near = difflib.get_close_matches(c, known, n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else f" (known: {', '.join(known)})"
+            raise InputError(f"unknown column {c!r}{hint}", str(loc.path))
+    for c in required:
+        if c not in cols:
+            near = difflib.get_close_matches(c, cols, n=1)
+            hint = f" (found {near[0]!r}: misspelt?)" if near else f" (found: {', '.join(cols) or 'none'})"
+            raise InputError(f"missing required column {c!r}{hint}", str(loc.path))
+    if len(loc.df) == 0:
+        raise InputError("no data rows", str(loc.path))
+
+
+def _coerce(loc: _Located, columns: dict[str, str]) -> None:
+    """Check types and finiteness column by column; convert in place."""
+    df = loc.df
+    for c, kind in columns.items():
+        if c not in df.columns:
+            continue
+        s = df[c]
+        if kind == "str":
+            bad = s.isna().to_numpy()
+            if c in ("walk_id", "bssid") and bad.any():
+                raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
+            # ids read by pandas as numbers ("1") become strings; floats like 1.0 keep their text form
+            df[c] = s.where(~s.isna(), "").astype(str)
+            continue
+        if not pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
+            num = pd.to_numeric(s, errors="coerce")
+            bad = (num.isna() & s.notna()).to_numpy()
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise InputError(f"column {c}: not a number: {s.iloc[i]!r}", loc.where(i))
+            s = num
+        v = s.to_numpy(dtype=np.float64)
+        nan = np.isnan(v)
+        if nan.any() and c not in NULLABLE:
+            raise InputError(f"column {c}: empty or NaN value", loc.where(int(np.argmax(nan))))
+        inf = np.isinf(v)
+        if inf.any():
+            raise InputError(f"column {c}: infinite value", loc.where(int(np.argmax(inf))))
+        df[c] = v
+
+
+def _concat(parts: list[_Located]) -> tuple[pd.DataFrame, Callable[[int], str]]:
+    """Concatenate located tables; the returned function maps a row of the result to its source."""
+    df = pd.concat([p.df for p in parts], ignore_index=True)
+    offsets = np.cumsum([0] + [len(p.df) for p in parts])
+
+    def where(i: int) -> str:
+        k = int(np.searchsorted(offsets, i, side="right") - 1)
+        return parts[k].where(i - int(offsets[k]))
+
+    return df, where
+
+
+def _integrate_increments(df: pd.DataFrame) -> pd.DataFrame:
+    """Per-step increments -> poses. Row 0 of a walk is the start (0, 0, 0); its increments are ignored.
+
+    Row k >= 1: heading_k = heading_{k-1} + dheading_k, then a step of step_length_m along heading_k.
+    """
+    out = df.copy()
+    g = out.groupby("walk_id", sort=False)
+    first = g.cumcount().to_numpy() == 0
+    dth = np.where(first, 0.0, out["dheading_rad"].to_numpy())
+    length = np.where(first, 0.0, out["step_length_m"].to_numpy())
+    walk = out["walk_id"].to_numpy()
+    heading = pd.Series(dth).groupby(walk, sort=False).cumsum().to_numpy()
+    dx = length * np.cos(heading)
+    dy = length * np.sin(heading)
+    out["x_m"] = pd.Series(dx).groupby(walk, sort=False).cumsum().to_numpy()
+    out["y_m"] = pd.Series(dy).groupby(walk, sort=False).cumsum().to_numpy()
+    out["heading_rad"] = heading
+    return out.drop(columns=["step_length_m", "dheading_rad"])
+
+
+@register
+class RmbuildSchemaReader(Reader):
+    name = "rmbuild"
+    description = "rmbuild's own CSV/Parquet schema (walks, poses, wifi, fixes + optional truth/)"
+
+    @classmethod
+    def sniff(cls, files: list[Path]) -> bool:
+        tables = {_table_of(f) for f in files}
+        return "poses" in tables or "wifi" in tables
+
+    def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
+        by_table: dict[str, list[Path]] = {}
+        skipped = 0
+        for f in files:
+            t = _table_of(f)
+            if t is None:
+                skipped += 1
+                continue
+            by_table.setdefault(t, []).append(f)
+        for t in ("poses", "wifi"):
+            if t not in by_table:
+                raise InputError(f"no {t} file among the inputs (expected a file named {t}*.csv or .parquet)")
+        where: dict[str, Callable[[int], str]] = {}
+
+        # poses: absolute or increments, one mode per file
+        parts = []
+        for f in by_table["poses"]:
+            loc = _Located(f, _read_file(f))
+            cols = set(map(str, loc.df.columns))
+            mode = POSE_INC if ("step_length_m" in cols or "dheading_rad" in cols) else POSE_ABS
+            _check_columns(loc, mode, POSE_OPT)
+            _coerce(loc, {**mode, **POSE_OPT})
+            if mode is POSE_INC:
+                loc.df = _integrate_increments(loc.df)
+            parts.append(loc)
+        poses, where["poses"] = _concat(parts)
+
+        tables: dict[str, pd.DataFrame] = {}
+        for t in ("wifi", "fixes", "walks", "truth/poses"):
+            if t not in by_table:
+                continue
+            req, opt = SCHEMAS[t]
+            parts = []
+            for f in by_table[t]:
+                loc = _Located(f, _read_file(f))
+                _check_columns(loc, req, opt)
+                _coerce(loc, {**req, **opt})
+                parts.append(loc)
+            tables[t], where[t] = _concat(parts)
+
+        wifi = tables["wifi"]
+        fixes = tables.get("fixes", pd.DataFrame({c: [] for c in ("walk_id", "t_s", "x_m", "y_m", "label")}))
+        walks = tables.get("walks")
+        if walks is None:
+            ids = pd.unique(poses["walk_id"])
+            walks = pd.DataFrame({"walk_id": ids, "device_id": "", "user_id": "", "role": ""})
+        else:
+            bad_role = ~walks.get("role", pd.Series("", index=walks.index)).isin(ROLES)
+            if bad_role.any():
+                i = int(np.argmax(bad_role.to_numpy()))
+                raise InputError(
+                    f"role must be one of {list(ROLES)}, got {walks['role'].iloc[i]!r}", where["walks"](i)
+                )
+        raw = RawInput(
+            walks=walks,
+            poses=poses,
+            wifi=wifi,
+            fixes=fixes,
+            truth_poses=tables.get("truth/poses"),
+            where=where,
+        )
+        if skipped:
+            raw.skipped["unrecognised file"] = skipped
+        for t, fs in by_table.items():
+            if t == "truth/venue":
+                try:
+                    raw.venue = json.loads(fs[0].read_text())
+                except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+                    raise InputError(f"invalid JSON ({e})", str(fs[0])) from None
+            elif t.startswith("truth/") and t != "truth/poses":
+                name = t.removeprefix("truth/")
+                df = pd.concat([_read_file(f) for f in fs], ignore_index=True)
+                if name == "aps":
+                    raw.truth_aps = df
+                else:
+                    raw.truth_extra[name] = df
+        return raw

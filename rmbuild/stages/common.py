@@ -1,0 +1,50 @@
+"""Helpers shared by the stages: the progress protocol and timing."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Protocol
+
+
+class Progress(Protocol):
+    """What a stage reports while it runs; the CLI draws it, tests pass None.
+
+    ``phase(name, total)`` starts a phase of ``total`` units (None: unknown); ``advance(n)`` moves it on;
+    ``message(text)`` is a one-line status.
+    """
+
+    def phase(self, name: str, total: float | None = None) -> None: ...
+
+    def advance(self, n: float = 1.0) -> None: ...
+
+    def message(self, text: str) -> None: ...
+
+
+class NullProgress:
+    def phase(self, name: str, total: float | None = None) -> None:
+        pass
+
+    def advance(self, n: float = 1.0) -> None:
+        pass
+
+    def message(self, text: str) -> None:
+        pass
+
+
+def ensure_progress(p: Progress | None) -> Progress:
+    return NullProgress() if p is None else p
+
+
+@contextmanager
+def timed(times: dict[str, float], key: str) -> Iterator[None]:
+    """Add the wall time of the block to ``times[key]`` (seconds)."""
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        times[key] = round(times.get(key, 0.0) + time.perf_counter() - t0, 4)
+
+
+ProgressCallback = Callable[[str, dict], None]

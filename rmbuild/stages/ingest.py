@@ -1,0 +1,47 @@
+"""`rmbuild ingest`: read input files, validate, attach readings to pose nodes, write a new workspace."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+from rmbuild.config import IngestConfig, to_toml
+from rmbuild.ingest_core import build_dataset
+from rmbuild.io.formats import choose_reader, expand_inputs
+from rmbuild.io.workspace import Workspace, write_dataset
+from rmbuild.stages.common import Progress, ensure_progress
+
+log = logging.getLogger(__name__)
+
+
+def run(
+    inputs: list[str | Path],
+    workspace: str | Path,
+    cfg: IngestConfig,
+    fmt: str | None = None,
+    force: bool = False,
+    progress: Progress | None = None,
+) -> dict:
+    """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report."""
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    files = expand_inputs(inputs)
+    ws_root = Path(workspace).resolve()
+    files = [f for f in files if ws_root not in f.resolve().parents]
+    reader = choose_reader(files, fmt)
+    progress.phase(f"reading {len(files)} file(s) as {reader.name}")
+    raw = reader.read(files, cfg)
+    t_read = time.perf_counter() - t0
+    progress.phase("validating and attaching readings")
+    ds, fp, summary = build_dataset(raw, cfg, source=reader.name)
+    summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
+    progress.phase("writing workspace")
+    with Workspace.create(workspace, force=force) as w:
+        write_dataset(w, ds, fp)
+        w.config(to_toml(cfg, "ingest"))
+        summary["time_s"] = {"read": round(t_read, 3), "total": round(time.perf_counter() - t0, 3)}
+        w.report = summary
+    for msg in summary["warnings"]:
+        log.warning(msg)
+    return summary

@@ -1,0 +1,152 @@
+"""The in-memory data model shared by every stage.
+
+Tables are pandas DataFrames with fixed column names (units in the names); the column lists below are the
+contract between readers, the workspace and the numerical core. A *node* is one pose of one walk; node ids
+are the row positions of :attr:`Dataset.poses` (walks in order, steps in order within a walk).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+#: Per-walk metadata. ``role`` is "" (unspecified), "map" or "test" (evaluation split hint).
+WALK_COLUMNS = ("walk_id", "device_id", "user_id", "role", "source")
+#: Per-step poses in the walk's own frame. Node id = row position.
+#: ``yaw_abs_rad``: an absolute (e.g. magnetometer-referenced) heading observation of this step in an
+#: unknown-but-common world frame, NaN when the device has none; ``yaw_abs_sigma_rad`` its 1-sigma.
+#: ``step_freq_hz``: step frequency at this step (NaN when unknown), for step models S = alpha f + beta.
+POSE_COLUMNS = (
+    "walk_id", "step", "t_s", "x_m", "y_m", "heading_rad", "yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz",
+)
+#: Wi-Fi readings; ``node`` = the pose node the reading is attached to (METHOD.md §1).
+WIFI_COLUMNS = ("walk_id", "t_s", "bssid", "rssi_dbm", "freq_mhz", "ssid", "node")
+#: Ground-truth position fixes (landmarks / waypoints), building frame.
+FIX_COLUMNS = ("walk_id", "t_s", "x_m", "y_m", "label")
+#: True poses per step (synthetic data only), building frame.
+TRUTH_POSE_COLUMNS = ("walk_id", "step", "t_s", "x_m", "y_m", "heading_rad")
+#: Anchors: known building-frame positions of a walk at a time (optional; fix the map's frame).
+ANCHOR_COLUMNS = ("walk_id", "t_s", "x_m", "y_m")
+
+
+@dataclass
+class Dataset:
+    """Everything ingest produces: walks, their poses, attached Wi-Fi readings and ground truth.
+
+    ``poses`` is sorted by walk (in ``walks`` order) then step, with a RangeIndex: row i is node i.
+    ``truth_poses`` (same row order as ``poses`` when present) and ``truth_aps`` exist for synthetic data.
+    ``venue`` is an optional JSON-able description of the floor plan (walls as segments, bounds).
+    """
+
+    walks: pd.DataFrame
+    poses: pd.DataFrame
+    wifi: pd.DataFrame
+    fixes: pd.DataFrame
+    truth_poses: pd.DataFrame | None = None
+    truth_aps: pd.DataFrame | None = None
+    venue: dict | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.poses)
+
+    def walk_ids(self) -> list[str]:
+        return list(self.walks["walk_id"])
+
+    def walk_slices(self) -> dict[str, slice]:
+        """walk_id -> slice of node ids (poses rows) of that walk."""
+        out: dict[str, slice] = {}
+        w = self.poses["walk_id"].to_numpy()
+        if len(w) == 0:
+            return out
+        change = np.flatnonzero(w[1:] != w[:-1]) + 1
+        starts = np.r_[0, change]
+        ends = np.r_[change, len(w)]
+        for s, e in zip(starts, ends):
+            out[str(w[s])] = slice(int(s), int(e))
+        return out
+
+    def walk_index(self) -> np.ndarray:
+        """int array (n_nodes,): index of each node's walk in ``walks`` order."""
+        order = {wid: i for i, wid in enumerate(self.walks["walk_id"])}
+        return self.poses["walk_id"].map(order).to_numpy(dtype=np.int64)
+
+
+@dataclass
+class Fingerprints:
+    """Per-node fingerprints: the per-AP mean RSSI of the readings attached to each node (METHOD.md §1).
+
+    ``node``: int64 (n,) node ids that have at least one reading, ascending.
+    ``bssids``: (n_ap,) AP identifiers, column order of the matrices.
+    ``rss_dbm``: float32 (n, n_ap) mean RSSI in dBm, NaN where the AP was not seen at that node.
+    ``count``: int32 (n, n_ap) number of readings averaged.
+    """
+
+    node: np.ndarray
+    bssids: np.ndarray
+    rss_dbm: np.ndarray
+    count: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.node)
+
+    @property
+    def detected(self) -> np.ndarray:
+        return ~np.isnan(self.rss_dbm)
+
+    def filled(self, fill_dbm: float = -110.0) -> np.ndarray:
+        """float32 (n, n_ap) with missing readings replaced by ``fill_dbm`` (METHOD.md §3)."""
+        out = self.rss_dbm.copy()
+        out[np.isnan(out)] = fill_dbm
+        return out
+
+    def subset(self, mask: np.ndarray) -> Fingerprints:
+        """Rows where ``mask`` (bool over rows) is true."""
+        return Fingerprints(self.node[mask], self.bssids, self.rss_dbm[mask], self.count[mask])
+
+    @staticmethod
+    def from_readings(wifi: pd.DataFrame, bssids: np.ndarray | None = None) -> Fingerprints:
+        """Average readings per (node, bssid). ``wifi`` needs columns node, bssid, rssi_dbm."""
+        if bssids is None:
+            bssids = np.array(sorted(wifi["bssid"].unique()), dtype=object)
+        ap_index = pd.Index(bssids)
+        col = ap_index.get_indexer(wifi["bssid"])
+        keep = col >= 0
+        node_raw = wifi["node"].to_numpy(dtype=np.int64)[keep]
+        col = col[keep]
+        rss = wifi["rssi_dbm"].to_numpy(dtype=np.float64)[keep]
+        nodes, row = np.unique(node_raw, return_inverse=True)
+        n, m = len(nodes), len(bssids)
+        flat = row * m + col
+        sums = np.bincount(flat, weights=rss, minlength=n * m).reshape(n, m)
+        cnt = np.bincount(flat, minlength=n * m).reshape(n, m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(cnt > 0, sums / np.maximum(cnt, 1), np.nan)
+        return Fingerprints(
+            nodes, np.asarray(bssids, dtype=object), mean.astype(np.float32), cnt.astype(np.int32)
+        )
+
+    def to_long(self) -> pd.DataFrame:
+        """Long table: node, bssid, rssi_dbm, count (one row per detected (node, AP))."""
+        r, c = np.nonzero(self.count > 0)
+        return pd.DataFrame({
+            "node": self.node[r],
+            "bssid": self.bssids[c].astype(str),
+            "rssi_dbm": self.rss_dbm[r, c].astype(np.float32),
+            "count": self.count[r, c].astype(np.int32),
+        })
+
+    @staticmethod
+    def from_long(df: pd.DataFrame) -> Fingerprints:
+        bssids = np.array(sorted(df["bssid"].unique()), dtype=object)
+        nodes = np.unique(df["node"].to_numpy(dtype=np.int64))
+        r = np.searchsorted(nodes, df["node"].to_numpy(dtype=np.int64))
+        c = pd.Index(bssids).get_indexer(df["bssid"])
+        rss = np.full((len(nodes), len(bssids)), np.nan, dtype=np.float32)
+        cnt = np.zeros((len(nodes), len(bssids)), dtype=np.int32)
+        rss[r, c] = df["rssi_dbm"].to_numpy(dtype=np.float32)
+        cnt[r, c] = df["count"].to_numpy(dtype=np.int32)
+        return Fingerprints(nodes, bssids, rss, cnt)
