@@ -7,6 +7,8 @@ RUN_DIR ?= runs/default
 PRESET ?= default
 SEED ?= 7
 
+RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
+
 .PHONY: venv run test bench lint clean
 
 $(BIN)/python:
@@ -22,7 +24,13 @@ venv: $(STAMP)
 
 ## make run: the whole pipeline on the embedded synthetic venue; prints where the results are
 run: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m rmbuild.pipeline_demo --out $(RUN_DIR) --preset $(PRESET) --seed $(SEED)
+	$(RM_CLI) simulate $(RUN_DIR)/input --preset $(PRESET) --seed $(SEED) --force
+	$(RM_CLI) ingest $(RUN_DIR)/input -w $(RUN_DIR)/workspace --force
+	@echo
+	@echo "results:"
+	@echo "  input files (simulated venue + truth/): $(RUN_DIR)/input"
+	@echo "  workspace:                              $(RUN_DIR)/workspace"
+	@echo "  stage reports:                          $(RUN_DIR)/workspace/reports/*.json"
 
 ## make test: ruff + the pytest suite
 test: $(STAMP)

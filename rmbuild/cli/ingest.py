@@ -31,5 +31,3 @@ def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
             f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes) -> {workspace}"
             + (f"; skipped {skipped}" if skipped else "")
         )
-        for w in s["warnings"]:
-            click.echo(f"warning: {w}", err=True)

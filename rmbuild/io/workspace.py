@@ -69,6 +69,7 @@ ARTEFACTS: dict[str, str] = {
     "optimize.walks": "optimize/walks.parquet",
     "optimize.history": "optimize/history.parquet",
     "optimize.tum_dir": "optimize/tum",
+    "optimize.anchors": "optimize/anchors.parquet",
     # map
     "map.cells": "map/radiomap.parquet",
     "map.nodes": "map/reference_nodes.parquet",

@@ -1,0 +1,51 @@
+"""Ingest throughput on the `large` preset vs a bare pandas.read_csv of the same files (one run, ratios)."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from bench.common import write_result
+from rmbuild.config import IngestConfig
+from rmbuild.config.simulate import preset_config
+from rmbuild.stages import ingest, simulate
+
+
+def main(preset: str = "large", seed: int = 7) -> dict:
+    tmp = Path(tempfile.mkdtemp(prefix="rmbuild-bench-ingest-"))
+    try:
+        t0 = time.perf_counter()
+        s = simulate.run(tmp / "input", preset_config(preset, seed))
+        t_sim = time.perf_counter() - t0
+        files = sorted((tmp / "input").glob("*.csv"))
+        t0 = time.perf_counter()
+        n_rows = sum(len(pd.read_csv(f)) for f in files)
+        t_read = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        r = ingest.run([tmp / "input"], tmp / "ws", IngestConfig())
+        t_ingest = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    res = {
+        "preset": preset,
+        "steps": s["steps"],
+        "readings": r["readings"],
+        "rows_read": n_rows,
+        "time_s": {"simulate": round(t_sim, 3), "pandas_read_csv": round(t_read, 3), "ingest": round(t_ingest, 3)},
+        "ingest_readings_per_s": round(r["readings"] / t_ingest),
+        "ratio_ingest_to_read_csv": round(t_ingest / t_read, 2),
+        "target_ratio_max": 3.0,
+    }
+    write_result("ingest", res)
+    print(f"ingest {preset}: {r['readings']} readings in {t_ingest:.2f} s "
+          f"({res['ingest_readings_per_s']}/s); pandas.read_csv {t_read:.2f} s; "
+          f"ratio {res['ratio_ingest_to_read_csv']}")
+    return res
+
+
+if __name__ == "__main__":
+    main()

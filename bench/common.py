@@ -1,0 +1,37 @@
+"""Helpers for benchmarks: where results go, peak memory, timing."""
+
+from __future__ import annotations
+
+import json
+import platform
+import resource
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far (MB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def machine() -> dict:
+    import os
+
+    return {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()}
+
+
+@contextmanager
+def stopwatch(out: dict, key: str):
+    t0 = time.perf_counter()
+    yield
+    out[key] = round(time.perf_counter() - t0, 4)
+
+
+def write_result(name: str, data: dict) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    p = RESULTS / f"{name}.json"
+    p.write_text(json.dumps({"machine": machine(), **data}, indent=2) + "\n")
+    return p

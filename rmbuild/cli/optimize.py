@@ -1,0 +1,44 @@
+"""`rmbuild optimize`."""
+
+from __future__ import annotations
+
+import click
+
+from rmbuild.cli.options import common_options, start, workspace_option
+
+
+@click.command()
+@workspace_option
+@click.option("--anchors", "anchors_path", type=click.Path(dir_okay=False), default=None,
+              help="CSV/Parquet with walk_id, t_s, x_m, y_m: known building-frame positions (position priors).")
+@click.option("--preset", type=click.Choice(["rmbuild", "paper"]), default=None,
+              help="Start from rmbuild's defaults or from seed 001's model as published (before --config).")
+@common_options
+def optimize(workspace, anchors_path, preset, config_path, force, quiet, verbose):
+    """Align all walks of WORKSPACE into one frame (GTSAM: odometry + fuzzy RSS-vicinity factors)."""
+    start(verbose, quiet)
+    from rmbuild.cli.progress import progress_display
+    from rmbuild.config import load_stage_config
+    from rmbuild.stages import optimize as stage
+    from rmbuild.stages.optimize import fmt_metric
+
+    base = None
+    if preset == "paper":
+        from rmbuild.config.optimize import paper_config
+
+        base = paper_config()
+    cfg = load_stage_config("optimize", config_path, base=base)
+    with progress_display(quiet) as progress:
+        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress)
+    if quiet:
+        return
+    f = r["factors"]
+    click.echo(f"optimized {r['walks']} walks / {r['poses']} poses: {f['odometry']} odometry, "
+               f"{f['vicinity']} vicinity, {f['prior']} prior factors in {r['time_s'].get('stage_total', 0):.1f} s "
+               f"(gauge: {r['gauge']})")
+    for name in ("raw", "optimized"):
+        m = r.get(name) or {}
+        lm = m.get("landmark_error_m")
+        click.echo(f"  {name:9s} ATE rmse {fmt_metric(m.get('ate_m'), 'rmse')} m, landmark error mean "
+                   f"{fmt_metric(lm, 'mean')} m (max {fmt_metric(lm, 'max')}), heading error mean "
+                   f"{fmt_metric(m.get('heading_alignment_error_deg'), 'mean')} deg")

@@ -1,0 +1,107 @@
+"""`rmbuild optimize`: align every walk into one frame; write poses, pairs, per-walk report, TUM files."""
+
+from __future__ import annotations
+
+import logging
+import math
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config import OptimizeConfig, to_toml
+from rmbuild.evaluate.trajectory import trajectory_metrics
+from rmbuild.io.anchors import read_anchors
+from rmbuild.io.workspace import Workspace
+from rmbuild.stages.common import Progress, ensure_progress
+
+log = logging.getLogger(__name__)
+
+
+def tum_text(poses: pd.DataFrame) -> str:
+    """TUM trajectory format (t x y z qx qy qz qw) of one walk's planar poses, for `evo`."""
+    th = poses["heading_rad"].to_numpy()
+    rows = np.column_stack([
+        poses["t_s"], poses["x_m"], poses["y_m"], np.zeros(len(th)),
+        np.zeros(len(th)), np.zeros(len(th)), np.sin(th / 2), np.cos(th / 2),
+    ])
+    return "".join(" ".join(f"{v:.6f}" for v in r) + "\n" for r in rows)
+
+
+def _safe_name(walk_id: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in walk_id) or "walk"
+
+
+def run(
+    workspace: str | Path,
+    cfg: OptimizeConfig,
+    anchors_path: str | Path | None = None,
+    progress: Progress | None = None,
+) -> dict:
+    """Run the SLAM back end on the workspace's walks; returns the optimize report."""
+    from rmbuild.slam import optimize
+
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    ws = Workspace.open(workspace)
+    ds = ws.read_dataset()
+    fp = ws.read_fingerprints()
+    anchors = read_anchors(anchors_path) if anchors_path is not None else None
+    state = {"phase": None}
+
+    def on_progress(phase: str, info: dict) -> None:
+        if phase != state["phase"]:
+            state["phase"] = phase
+            progress.phase(phase, info.get("total"))
+        if phase == "solve" and "cost_after" in info:
+            progress.message(f"outer {info.get('outer')} iteration {info.get('iteration')}: "
+                             f"cost {info['cost_after']:.4g}")
+        elif "done" in info:
+            progress.advance(0)
+
+    result = optimize(ds, fp, cfg, anchors=anchors, progress=on_progress)
+    gauge = "anchors" if anchors is not None and len(anchors) else "se2"
+    t_metrics = time.perf_counter()
+    raw = trajectory_metrics(ds.poses, ds, align=True)
+    opt = trajectory_metrics(result.poses, ds, align=gauge == "se2")
+    stats = dict(result.stats)
+    time_s = dict(stats.pop("time_s", {}))
+    time_s["metrics"] = time.perf_counter() - t_metrics
+    report = {
+        "stage": "optimize",
+        "factors": stats.pop("factors"),
+        "walks": len(ds.walks),
+        "poses": len(ds.poses),
+        "gauge": gauge,
+        "time_s": {k: round(float(v), 4) for k, v in time_s.items()},
+        "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "raw": raw,
+        "optimized": opt,
+        **stats,
+    }
+    with ws.writing("optimize") as w:
+        w.table("optimize.poses", result.poses)
+        w.table("optimize.initial_poses", result.initial_poses)
+        w.table("optimize.pairs", result.pairs)
+        w.table("optimize.walks", result.walks)
+        w.table("optimize.history", pd.DataFrame({"iteration": np.arange(len(result.cost_history)),
+                                                  "cost": result.cost_history}))
+        tum = w.path("optimize.tum_dir")
+        tum.mkdir(parents=True, exist_ok=True)
+        for wid, g in result.poses.groupby("walk_id", sort=False):
+            (tum / f"{_safe_name(str(wid))}.txt").write_text(tum_text(g))
+        if anchors is not None:
+            w.table("optimize.anchors", anchors)
+        w.config(to_toml(cfg, "optimize"))
+        report["time_s"]["stage_total"] = round(time.perf_counter() - t0, 3)
+        w.report = report
+    return report
+
+
+def fmt_metric(m: dict | None, key: str) -> str:
+    if not m or m.get(key) is None:
+        return "n/a"
+    v = m[key]
+    return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f}"
