@@ -32,12 +32,13 @@ def _v(x: object) -> str:
 
 def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: bool, what: str) -> None:
     """Times must not go backwards within a walk (strictly increase when ``strict``), in file order."""
-    w = df["walk_id"].to_numpy()
+    codes, names = pd.factorize(df["walk_id"])
     t = df["t_s"].to_numpy(dtype=np.float64)
     # previous row of the same walk, in file order
-    order = np.argsort(w, kind="stable")
-    ws, ts = w[order], t[order]
-    same = ws[1:] == ws[:-1]
+    order = np.argsort(codes, kind="stable")
+    cs, ts = codes[order], t[order]
+    ws = np.asarray(names, dtype=object)[cs]
+    same = cs[1:] == cs[:-1]
     dt = ts[1:] - ts[:-1]
     bad = same & ((dt <= 0) if strict else (dt < 0))
     if bad.any():
@@ -154,10 +155,10 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     has_poses = walks["walk_id"].isin(set(raw.poses["walk_id"]))
     dropped_walks = walks.loc[~has_poses, "walk_id"].tolist()
     walks = walks[has_poses].reset_index(drop=True)
-    order = {w: i for i, w in enumerate(walks["walk_id"])}
+    walk_index = pd.Index(walks["walk_id"])
 
     poses = raw.poses.copy()
-    poses["_w"] = poses["walk_id"].map(order)
+    poses["_w"] = walk_index.get_indexer(poses["walk_id"])
     poses = poses.sort_values(["_w", "t_s"], kind="stable").drop(columns="_w").reset_index(drop=True)
     poses["step"] = poses.groupby("walk_id", sort=False).cumcount().astype(np.int64)
     for c in ("yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz"):
@@ -172,8 +173,8 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
         wifi["freq_mhz"] = np.nan
     if "ssid" not in wifi.columns:
         wifi["ssid"] = ""
-    wifi["_w"] = wifi["walk_id"].map(order)
-    wifi = wifi.sort_values(["_w", "t_s", "bssid"], kind="stable").drop(columns="_w").reset_index(drop=True)
+    wifi["_w"] = walk_index.get_indexer(wifi["walk_id"])
+    wifi = wifi.sort_values(["_w", "t_s"], kind="stable").drop(columns="_w").reset_index(drop=True)
     wifi["node"] = attach(poses, wifi, cfg)
     n_dropped = int((wifi["node"] < 0).sum())
     wifi = wifi[wifi["node"] >= 0].reset_index(drop=True)

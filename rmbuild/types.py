@@ -71,8 +71,7 @@ class Dataset:
 
     def walk_index(self) -> np.ndarray:
         """int array (n_nodes,): index of each node's walk in ``walks`` order."""
-        order = {wid: i for i, wid in enumerate(self.walks["walk_id"])}
-        return self.poses["walk_id"].map(order).to_numpy(dtype=np.int64)
+        return pd.Index(self.walks["walk_id"]).get_indexer(self.poses["walk_id"]).astype(np.int64)
 
 
 @dataclass
@@ -111,9 +110,10 @@ class Fingerprints:
     def from_readings(wifi: pd.DataFrame, bssids: np.ndarray | None = None) -> Fingerprints:
         """Average readings per (node, bssid). ``wifi`` needs columns node, bssid, rssi_dbm."""
         if bssids is None:
-            bssids = np.array(sorted(wifi["bssid"].unique()), dtype=object)
-        ap_index = pd.Index(bssids)
-        col = ap_index.get_indexer(wifi["bssid"])
+            col, uniq = pd.factorize(wifi["bssid"], sort=True)
+            bssids = np.asarray(uniq, dtype=object)
+        else:
+            col = pd.Index(bssids).get_indexer(wifi["bssid"])
         keep = col >= 0
         node_raw = wifi["node"].to_numpy(dtype=np.int64)[keep]
         col = col[keep]
