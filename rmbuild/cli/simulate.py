@@ -21,7 +21,7 @@ from rmbuild.cli.options import common_options, start
 def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet, verbose):
     """Write a seeded synthetic venue to OUT_DIR: the files `rmbuild ingest OUT_DIR` reads, plus truth/.
 
-    A --config file's [simulate] table replaces the preset entirely.
+    A --config file's [simulate] table is applied on top of the preset (nested tables key by key).
     """
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -31,7 +31,7 @@ def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet,
     from rmbuild.errors import InputError
     from rmbuild.stages import simulate as stage
 
-    cfg = load_stage_config("simulate", config_path) if config_path else preset_config(preset, seed)
+    cfg = load_stage_config("simulate", config_path, base=preset_config(preset, seed))
     if test_device is not None:
         try:
             k, b = (float(v) for v in test_device.split(","))
