@@ -1,0 +1,85 @@
+"""`rmbuild view`, and the `--rerun` option every stage command can share (:data:`rerun_option`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from rmbuild.cli.options import start, workspace_option
+
+#: `--rerun` for stage commands: absent -> no viewer; `--rerun` alone -> "auto" (spawn when a display is
+#: available, else save WORKSPACE/<stage>.rrd); `--rerun spawn|serve|FILE.rrd`.
+rerun_option = click.option(
+    "--rerun", "rerun", default=None, is_flag=False, flag_value="auto", metavar="[spawn|serve|FILE.rrd]",
+    help="Log to rerun while the stage runs: spawn the viewer, serve the web viewer, or save FILE.rrd "
+         "(alone: spawn with a display, else save WORKSPACE/<stage>.rrd).",
+)
+
+
+def rerun_target(value: str | None, workspace: str | Path, stage: str):
+    """The ViewTarget for a stage's ``--rerun`` value (None -> None: the stage gets a NullViewer)."""
+    if value is None:
+        return None
+    from rmbuild.viz import ViewTarget, default_target
+
+    if value == "auto":
+        return default_target(Path(workspace) / f"{stage}.rrd")
+    if value in ("spawn", "serve"):
+        return ViewTarget(value)
+    if not value.endswith(".rrd"):
+        raise click.BadParameter("expected spawn, serve or a path ending in .rrd", param_hint="--rerun")
+    return ViewTarget("save", Path(value))
+
+
+@click.command()
+@workspace_option
+@click.option("--save", "save_path", type=click.Path(dir_okay=False), default=None,
+              help="Write the recording to FILE.rrd (default WORKSPACE/view.rrd when there is no display).")
+@click.option("--spawn", is_flag=True, help="Open the native rerun viewer.")
+@click.option("--serve", is_flag=True, help="Serve the web viewer on localhost (see --port).")
+@click.option("--port", type=int, default=9090, show_default=True,
+              help="Web viewer port for --serve (its gRPC server uses PORT+1).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
+def view(workspace, save_path, spawn, serve, port, quiet, verbose):
+    """Log what WORKSPACE holds (walks, optimisation, radio map, evaluation) to the rerun viewer."""
+    start(verbose, quiet)
+    if sum(map(bool, (save_path, spawn, serve))) > 1:
+        raise click.UsageError("give at most one of --save, --spawn, --serve")
+    from rmbuild.stages import view as stage
+    from rmbuild.viz import ViewTarget, default_target
+
+    if save_path:
+        target = ViewTarget("save", Path(save_path))
+    elif spawn or serve:
+        target = ViewTarget("spawn" if spawn else "serve", port=port)
+    else:
+        target = default_target(Path(workspace) / "view.rrd", port=port)
+    if target.mode == "serve":  # the viewer must outlive the logging: keep it open until Ctrl-C
+        from rmbuild.viz import open_viewer
+
+        viewer = open_viewer(target, recording_name=f"rmbuild {Path(workspace).name}")
+        r = stage.run(workspace, viewer=viewer)
+        click.echo(f"logged {', '.join(r['logged'])}; serving the web viewer on http://localhost:{port} "
+                   f"(Ctrl-C to stop)", err=True)
+        try:
+            _wait_forever()
+        finally:
+            viewer.close()
+    r = stage.run(workspace, target)
+    if quiet:
+        return
+    where = r["path"] if r["path"] else f"the {r['mode']} viewer"
+    click.echo(f"logged {', '.join(r['logged'])} to {where} in {r['time_total_s']:.1f} s")
+    for k, why in r["skipped"].items():
+        click.echo(f"  skipped {k}: {why}")
+    if r["path"]:
+        click.echo(f"recording: {r['path']}  (open with: rerun {r['path']})")
+
+
+def _wait_forever() -> None:  # pragma: no cover - interactive
+    import time
+
+    while True:
+        time.sleep(3600)

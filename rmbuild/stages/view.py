@@ -1,0 +1,119 @@
+"""`rmbuild view`: log whatever a workspace holds to a rerun recording (file, native viewer or web viewer).
+
+Every stage's outputs are optional: a stage that has not run is skipped (and said so in the summary), and
+tables lacking optional columns are logged as far as they go.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rmbuild.io.workspace import Workspace
+from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.viz import NullViewer, Viewer, ViewTarget, open_viewer
+from rmbuild.viz.align import frame_to_truth
+
+log = logging.getLogger(__name__)
+
+
+def log_workspace(ws: Workspace, viewer: Viewer | NullViewer, progress: Progress | None = None) -> dict:
+    """Log every stage ``ws`` holds to ``viewer``; returns {"logged": [...], "skipped": {...}, "time_s"}."""
+    progress = ensure_progress(progress)
+    logged: list[str] = []
+    skipped: dict[str, str] = {}
+    times: dict[str, float] = {}
+
+    def step(name: str) -> float:
+        progress.phase(name)
+        return time.perf_counter()
+
+    t = step("ingest")
+    ds = ws.read_dataset()
+    viewer.set_walks(ds.walk_ids())
+    viewer.log_venue(ds.venue)
+    viewer.log_raw_walks(ds.poses)
+    logged.append("raw walks")
+    if ds.truth_poses is not None and len(ds.truth_poses):
+        viewer.log_truth(ds.truth_poses)
+        logged.append("truth")
+    else:
+        skipped["truth"] = "no data/truth/poses.parquet"
+    times["ingest"] = time.perf_counter() - t
+
+    if ws.has("optimize"):
+        t = step("optimize")
+        opt = ws.read_table("optimize.poses")
+        gauge = (ws.read_report("optimize") or {}).get("gauge")
+        rt = frame_to_truth(opt, ds.truth_poses, gauge)
+        if rt is not None:
+            viewer.log_alignment(float(np.arctan2(rt[0][1, 0], rt[0][0, 0])), rt[1])
+        viewer.log_optimized(opt)
+        if ws.exists("optimize.initial_poses"):
+            viewer.log_optimized(ws.read_table("optimize.initial_poses"), kind="initial")
+        pairs = ws.read_table("optimize.pairs") if ws.exists("optimize.pairs") else None
+        if pairs is not None:
+            viewer.log_vicinity(pairs, opt[["x_m", "y_m"]].to_numpy(dtype=np.float64))
+        if ws.exists("optimize.history"):
+            h = ws.read_table("optimize.history")
+            if "cost" in h:
+                viewer.log_cost_history(h["cost"].to_numpy(), h["iteration"].to_numpy() if "iteration" in h
+                                        else None)
+        if len(opt) == len(ds.poses):
+            viewer.log_residuals(ds.poses, opt, pairs)
+        logged.append("optimize")
+        times["optimize"] = time.perf_counter() - t
+    else:
+        skipped["optimize"] = "stage not run"
+
+    if ws.has("map") and ws.exists("map.cells"):
+        t = step("map")
+        sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
+        grid = (sidecar or {}).get("grid") or {}
+        viewer.log_radiomap(ws.read_table("map.cells"), cell_size_m=grid.get("cell_size_m"),
+                            origin_xy_m=grid.get("origin_xy_m"))
+        logged.append("map")
+        times["map"] = time.perf_counter() - t
+    else:
+        skipped["map"] = "stage not run"
+
+    if ws.has("evaluate") and ws.exists("evaluate.tracks"):
+        t = step("evaluate")
+        n = viewer.log_tracks(ws.read_table("evaluate.tracks"))
+        (logged.append("evaluate") if n else skipped.__setitem__("evaluate", "no usable tracks"))
+        times["evaluate"] = time.perf_counter() - t
+    else:
+        skipped["evaluate"] = "stage not run"
+    return {"logged": logged, "skipped": skipped, "time_s": {k: round(v, 4) for k, v in times.items()}}
+
+
+def run(workspace: str | Path, target: ViewTarget | None = None, viewer: Viewer | NullViewer | None = None,
+        progress: Progress | None = None) -> dict:
+    """Log ``workspace`` to ``viewer`` (left open: the caller closes it, e.g. a served viewer that must stay
+    up) or else to a new viewer for ``target`` (closed at the end: the .rrd is complete on return).
+    Returns a summary: what was logged and skipped, where, counts, timings."""
+    t0 = time.perf_counter()
+    ws = Workspace.open(workspace)
+    ws.require("ingest")
+    if viewer is None:
+        if target is None:
+            raise ValueError("view.run needs a target or a viewer")
+        with open_viewer(target, recording_name=f"rmbuild {Path(workspace).name}") as v:
+            summary = log_workspace(ws, v, progress)
+            counts = dict(getattr(v, "counts", {}))
+    else:
+        summary = log_workspace(ws, viewer, progress)
+        viewer.flush()
+        counts = dict(getattr(viewer, "counts", {}))
+        target = getattr(viewer, "target", target)
+    summary.update({
+        "stage": "view",
+        "mode": target.mode if target is not None else None,
+        "path": str(target.path) if target is not None and target.path is not None else None,
+        "counts": counts,
+        "time_total_s": round(time.perf_counter() - t0, 3),
+    })
+    return summary

@@ -1,0 +1,300 @@
+"""A one-page, self-contained HTML report of a workspace (figures embedded as base64 PNG data URIs).
+
+:func:`build_report` reads what the workspace holds (any stage may be missing) and returns the page and
+its figures in memory; :func:`rmbuild.stages.report.run` writes them. Figures: walks before/after the
+optimisation over the floor plan, heat maps of the strongest APs, CDFs of every localizer and map, the
+optimiser's cost; tables: key figures (reports/*.json) and the config each stage ran with.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import logging
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from rmbuild import __version__
+from rmbuild.io.workspace import STAGE_DIRS, Workspace
+from rmbuild.viz import figures
+from rmbuild.viz.align import apply, frame_to_truth, per_walk_to_truth
+
+log = logging.getLogger(__name__)
+
+#: (stage, dotted key in reports/<stage>.json, label) shown in the key-figures table when present
+KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
+    ("ingest", "walks", "walks"),
+    ("ingest", "poses", "poses (steps)"),
+    ("ingest", "readings", "Wi-Fi readings"),
+    ("ingest", "scans", "scans"),
+    ("ingest", "aps", "access points"),
+    ("ingest", "fixes", "position fixes"),
+    ("optimize", "factors.odometry", "odometry factors"),
+    ("optimize", "factors.vicinity", "vicinity factors"),
+    ("optimize", "linked_walks", "walks linked into the map"),
+    ("optimize", "components", "connected components"),
+    ("optimize", "gauge", "gauge"),
+    ("optimize", "iterations", "optimiser iterations"),
+    ("optimize", "final_cost", "final cost"),
+    ("optimize", "raw.ate_m.rmse", "raw PDR ATE rmse (m)"),
+    ("optimize", "optimized.ate_m.rmse", "optimised ATE rmse (m)"),
+    ("optimize", "optimized.landmark_error_m.mean", "optimised landmark error mean (m)"),
+    ("optimize", "time_s.stage_total", "optimise time (s)"),
+    ("map", "n_cells", "radio map cells"),
+    ("map", "n_aps", "radio map APs"),
+    ("map", "cell_size_m", "cell size (m)"),
+)
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1180px;
+ color:#222;padding:0 1em;line-height:1.4}
+h1{font-size:1.6em;margin-bottom:.2em} h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
+.meta{color:#666;font-size:.9em} figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee}
+figcaption{color:#555;font-size:.9em} table{border-collapse:collapse;font-size:.9em;margin:.5em 0}
+td,th{border:1px solid #ddd;padding:.25em .6em;text-align:left}
+td.num{text-align:right;font-variant-numeric:tabular-nums}
+th{background:#f5f5f5} pre{background:#f7f7f7;padding:.7em;overflow-x:auto;font-size:.85em}
+.missing{color:#999;font-style:italic} details{margin:.4em 0}
+"""
+
+
+@dataclass
+class ReportFigure:
+    """One figure of the report: ``name`` (PNG file stem), ``title``, ``png`` bytes, ``caption``."""
+
+    name: str
+    title: str
+    png: bytes
+    caption: str = ""
+
+
+@dataclass
+class Report:
+    """The page (``html``, self-contained), its figures and what was missing (section -> why)."""
+
+    html: str
+    figures: list[ReportFigure]
+    missing: dict[str, str] = field(default_factory=dict)
+
+
+def _png(fig: Any, dpi: int = 100) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _get(d: Any, dotted: str) -> Any:
+    for part in dotted.split("."):
+        if not isinstance(d, dict) or part not in d:
+            return None
+        d = d[part]
+    return d
+
+
+def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+    elif isinstance(d, list):
+        if d and len(d) <= 8 and all(not isinstance(v, (dict, list)) for v in d):
+            out[prefix[:-1]] = ", ".join(map(str, d))
+        elif d:
+            out[prefix[:-1]] = f"[{len(d)} values]"
+    else:
+        out[prefix[:-1]] = d
+    return out
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return f"{v:.4g}" if abs(v) < 1e5 else f"{v:.3e}"
+    return str(v)
+
+
+def _table(rows: list[tuple[str, ...]], header: tuple[str, ...]) -> str:
+    h = "".join(f"<th>{html.escape(c)}</th>" for c in header)
+    body = "".join(
+        "<tr>" + "".join(
+            f"<td class=\"num\">{html.escape(c)}</td>" if i and _is_num(c) else f"<td>{html.escape(c)}</td>"
+            for i, c in enumerate(r)) + "</tr>"
+        for r in rows)
+    return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _is_num(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def _errors_by_label(df: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Per "map / localizer" the per-scan errors (m) of evaluate/errors.parquet, long or wide layout."""
+    err_col = next((c for c in ("error_m", "err_m", "error") if c in df.columns), None)
+    if err_col is not None:
+        keys = [c for c in ("map", "localizer") if c in df.columns]
+        if not keys:
+            return {"all": df[err_col].to_numpy(dtype=float)}
+        return {" / ".join(map(str, k if isinstance(k, tuple) else (k,))): g[err_col].to_numpy(dtype=float)
+                for k, g in df.groupby(keys, sort=False)}
+    skip = {"walk_id", "t_s", "node", "scan", "step", "x_m", "y_m"}
+    return {str(c): df[c].to_numpy(dtype=float) for c in df.columns
+            if c not in skip and pd.api.types.is_float_dtype(df[c])}
+
+
+def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
+    """Read ``ws`` and lay out the report; stages that have not run leave a note instead of a section."""
+    ws.require("ingest")
+    figs: list[ReportFigure] = []
+    missing: dict[str, str] = {}
+    sections: list[str] = []
+    reports = {s: ws.read_report(s) for s in STAGE_DIRS}
+    ds = ws.read_dataset()
+    walls = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
+    walls = walls if len(walls) else None
+    walk_ids = ds.walk_ids()
+
+    # ---------------------------------------------------------------- walks
+    opt = ws.read_table("optimize.poses") if ws.has("optimize") else None
+    gauge = (reports.get("optimize") or {}).get("gauge")
+    rt = frame_to_truth(opt, ds.truth_poses, gauge) if opt is not None else None
+    panels: list[tuple[str, pd.DataFrame]] = []
+    raw_aligned = per_walk_to_truth(ds.poses, ds.truth_poses)
+    if raw_aligned is not None:
+        panels.append(("before: raw PDR, each walk fitted to the truth on its own (SE(2))", raw_aligned))
+    else:
+        panels.append(("before: raw PDR, each walk in its own frame", ds.poses))
+    if opt is not None:
+        shown = opt.copy()
+        if rt is not None:
+            xy = apply(rt, opt[["x_m", "y_m"]].to_numpy(dtype=float))
+            shown["x_m"], shown["y_m"] = xy[:, 0], xy[:, 1]
+            title = "after: optimised, one SE(2) for all walks into the building frame"
+        else:
+            title = f"after: optimised, common frame (gauge {gauge})"
+        panels.append((title, shown))
+    else:
+        missing["optimize"] = "optimize has not run: only the raw walks are shown"
+    plan_frame_ok = ds.truth_poses is not None or gauge == "anchors"
+    fig = figures.walks_figure(panels, walk_ids, truth=ds.truth_poses,
+                               walls=walls if (plan_frame_ok or opt is None) else None)
+    figs.append(ReportFigure("walks", "Walks before and after optimisation", _png(fig),
+                             "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan."))
+    if ws.has("optimize") and ws.exists("optimize.history"):
+        h = ws.read_table("optimize.history")
+        if "cost" in h and len(h):
+            figs.append(ReportFigure("cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy())),
+                                     "Cost after each Levenberg-Marquardt iteration (all outer loops)."))
+
+    # ---------------------------------------------------------------- radio map
+    if ws.has("map") and ws.exists("map.cells"):
+        cells = ws.read_table("map.cells")
+        sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
+        cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
+        walls_map = None
+        if walls is not None:
+            if gauge == "anchors" or rt is None:
+                walls_map = walls if gauge == "anchors" else None
+            else:  # walls into the map (optimiser) frame: map = R^T (building - t)
+                r, t = rt
+                pts = (walls.reshape(-1, 2) - t) @ r
+                walls_map = pts.reshape(-1, 4)
+        fig = figures.heatmaps_figure(cells, heatmap_top_n, walls_map, cell_size)
+        if fig is not None:
+            figs.append(ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig),
+                                     "Mean RSSI per cell (dBm) in the map frame; empty cells were never visited."))
+        else:
+            missing["map"] = "the radio map table has no usable rows"
+    else:
+        missing["map"] = "export-map has not run"
+
+    # ---------------------------------------------------------------- evaluation
+    ev = reports.get("evaluate")
+    eval_rows: list[tuple[str, ...]] = []
+    if ws.has("evaluate"):
+        if ws.exists("evaluate.errors"):
+            errs = _errors_by_label(ws.read_table("evaluate.errors"))
+            if errs:
+                figs.append(ReportFigure("cdf", "Localization error CDFs", _png(figures.cdf_figure(errs)),
+                                         "Per test scan, error of each localizer with each map "
+                                         "(built: from the optimised walks; surveyed: from true positions; "
+                                         "raw: from raw PDR)."))
+        maps = (ev or {}).get("maps") or {}
+        for mname, locs in maps.items():
+            for lname, st in (locs or {}).items():
+                st = st or {}
+                eval_rows.append((str(mname), str(lname), *(_fmt(st.get(k)) for k in ("mean", "median", "p90", "n"))))
+    else:
+        missing["evaluate"] = "evaluate has not run"
+
+    # ---------------------------------------------------------------- tables
+    key_rows = []
+    for stage, key, label in KEY_FIGURES:
+        v = _get(reports.get(stage), key)
+        if v is not None:
+            key_rows.append((label, _fmt(v), f"{stage}: {key}"))
+    details = []
+    for stage, rep in reports.items():
+        if rep is None:
+            continue
+        flat = [(k, _fmt(v)) for k, v in _flatten(rep).items() if k]
+        details.append(f"<details><summary>reports/{html.escape(stage)}.json ({len(flat)} values)</summary>"
+                       f"{_table(flat, ('key', 'value'))}</details>")
+    configs = []
+    for stage, d in STAGE_DIRS.items():
+        p = ws.root / d / "config.toml"
+        if p.is_file():
+            configs.append(f"<h3>{html.escape(stage)} <span class=\"meta\">({html.escape(d)}/config.toml)</span></h3>"
+                           f"<pre>{html.escape(p.read_text())}</pre>")
+
+    # ---------------------------------------------------------------- page
+    def fig_html(f: ReportFigure) -> str:
+        uri = "data:image/png;base64," + base64.b64encode(f.png).decode("ascii")
+        return (f"<figure id=\"fig-{f.name}\"><img src=\"{uri}\" alt=\"{html.escape(f.title)}\">"
+                f"<figcaption>{html.escape(f.title)}. {html.escape(f.caption)}</figcaption></figure>")
+
+    by_name = {f.name: f for f in figs}
+    sections.append("<h2>Walks</h2>" + fig_html(by_name["walks"]) + (fig_html(by_name["cost"]) if "cost" in by_name
+                                                                    else ""))
+    sections.append("<h2>Radio map</h2>" + (fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
+                                            else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>"))
+    ev_html = "<h2>Localization</h2>"
+    if "cdf" in by_name:
+        ev_html += fig_html(by_name["cdf"])
+    if eval_rows:
+        ev_html += _table(eval_rows, ("map", "localizer", "mean (m)", "median (m)", "p90 (m)", "scans"))
+    if "cdf" not in by_name and not eval_rows:
+        ev_html += f"<p class=\"missing\">{html.escape(missing.get('evaluate', 'no evaluation results'))}</p>"
+    sections.append(ev_html)
+    sections.append("<h2>Key figures</h2>" + (_table(key_rows, ("figure", "value", "source")) if key_rows
+                                              else "<p class=\"missing\">no stage reports</p>") + "".join(details))
+    sections.append("<h2>Configuration used</h2>" + ("".join(configs) or "<p class=\"missing\">none found</p>"))
+    stages_run = [s for s in STAGE_DIRS if ws.has(s)]
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    page = (
+        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+        f"<title>rmbuild report: {html.escape(ws.root.name)}</title>"
+        f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style></head><body>"
+        f"<h1>rmbuild report: {html.escape(ws.root.name)}</h1>"
+        f"<p class=\"meta\">workspace {html.escape(str(ws.root.resolve()))} · stages: {', '.join(stages_run)} · "
+        f"rmbuild {__version__} · written {now}</p>"
+        + "".join(sections)
+        + f"<script type=\"application/json\" id=\"rmbuild-missing\">{html.escape(json.dumps(missing))}</script>"
+        "</body></html>\n"
+    )
+    return Report(page, figs, missing)
