@@ -164,7 +164,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     for c in ("yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz"):
         if c not in poses.columns:
             poses[c] = np.nan
-    poses = poses[list(POSE_COLUMNS)]
+    poses = poses[list(POSE_COLUMNS) + [c for c in poses.columns if c not in POSE_COLUMNS]]
     one_step = poses.groupby("walk_id", sort=False).size()
     one_step = one_step[one_step < 2]
 
@@ -184,7 +184,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     fixes = raw.fixes.copy()
     if "label" not in fixes.columns:
         fixes["label"] = ""
-    fixes = fixes[list(FIX_COLUMNS)].reset_index(drop=True)
+    fixes = fixes[list(FIX_COLUMNS) + [c for c in fixes.columns if c not in FIX_COLUMNS]].reset_index(drop=True)
 
     truth = raw.truth_poses
     if truth is not None:

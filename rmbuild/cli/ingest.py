@@ -21,8 +21,9 @@ def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
     from rmbuild.stages import ingest as stage
 
     cfg = load_stage_config("ingest", config_path)
+    pdr_cfg = load_stage_config("pdr", config_path)
     with progress_display(quiet) as progress:
-        s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress)
+        s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg)
     if not quiet:
         skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
         click.echo(

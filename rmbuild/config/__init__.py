@@ -13,6 +13,7 @@ from rmbuild.config.base import from_dict, load_toml, section_of, to_dict, to_to
 from rmbuild.config.evaluate import EvaluateConfig
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.config.pdr import PdrConfig
 from rmbuild.config.radiomap import MapConfig
 from rmbuild.config.simulate import SimulateConfig
 from rmbuild.errors import ConfigError
@@ -21,6 +22,7 @@ from rmbuild.errors import ConfigError
 SECTIONS: dict[str, type] = {
     "simulate": SimulateConfig,
     "ingest": IngestConfig,
+    "pdr": PdrConfig,
     "optimize": OptimizeConfig,
     "map": MapConfig,
     "evaluate": EvaluateConfig,
@@ -66,6 +68,7 @@ __all__ = [
     "IngestConfig",
     "MapConfig",
     "OptimizeConfig",
+    "PdrConfig",
     "SimulateConfig",
     "load_stage_config",
     "to_toml",

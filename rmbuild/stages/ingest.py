@@ -6,7 +6,7 @@ import logging
 import time
 from pathlib import Path
 
-from rmbuild.config import IngestConfig, to_toml
+from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.ingest_core import build_dataset
 from rmbuild.io.formats import choose_reader, expand_inputs
 from rmbuild.io.workspace import Workspace, write_dataset
@@ -22,14 +22,19 @@ def run(
     fmt: str | None = None,
     force: bool = False,
     progress: Progress | None = None,
+    pdr_cfg: PdrConfig | None = None,
 ) -> dict:
-    """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report."""
+    """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report.
+
+    ``pdr_cfg``: options of the raw-IMU formats (phone PDR, ILC/IPIN specifics); defaults when None.
+    """
     progress = ensure_progress(progress)
     t0 = time.perf_counter()
     files = expand_inputs(inputs)
     ws_root = Path(workspace).resolve()
     files = [f for f in files if ws_root not in f.resolve().parents]
-    reader = choose_reader(files, fmt)
+    pdr_cfg = pdr_cfg or PdrConfig()
+    reader = choose_reader(files, fmt, pdr_cfg)
     progress.phase(f"reading {len(files)} file(s) as {reader.name}")
     raw = reader.read(files, cfg)
     t_read = time.perf_counter() - t0
@@ -39,7 +44,7 @@ def run(
     progress.phase("writing workspace")
     with Workspace.create(workspace, force=force) as w:
         write_dataset(w, ds, fp)
-        w.config(to_toml(cfg, "ingest"))
+        w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if reader.name != "rmbuild" else ""))
         summary["time_s"] = {"read": round(t_read, 3), "total": round(time.perf_counter() - t0, 3)}
         w.report = summary
     for msg in summary["warnings"]:

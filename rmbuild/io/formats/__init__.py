@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
+from typing import Any
 
 from rmbuild.errors import InputError
 from rmbuild.io.formats.base import REGISTRY, RawInput, Reader, register
 
 #: modules that define readers (imported once, in this order; sniffing tries them in this order)
-_MODULES = ("rmbuild_schema",)
+_MODULES = ("rmbuild_schema", "msft_ilc", "ipin")
 _loaded = False
 
 
@@ -44,16 +45,19 @@ def expand_inputs(paths: list[str | Path]) -> list[Path]:
     return out
 
 
-def choose_reader(files: list[Path], fmt: str | None) -> Reader:
-    """The reader named ``fmt``, or the first registered reader whose ``sniff`` accepts ``files``."""
+def choose_reader(files: list[Path], fmt: str | None, options: Any = None) -> Reader:
+    """The reader named ``fmt``, or the first registered reader whose ``sniff`` accepts ``files``.
+
+    ``options`` (the ``[pdr]`` config) is handed to the reader's constructor.
+    """
     _load()
     if fmt is not None:
         if fmt not in REGISTRY:
             raise InputError(f"unknown format {fmt!r} (known: {', '.join(REGISTRY)})")
-        return REGISTRY[fmt]()
+        return REGISTRY[fmt](options)
     for cls in REGISTRY.values():
         if cls.sniff(files):
-            return cls()
+            return cls(options)
     raise InputError(
         f"could not recognise the input format of {files[0]} (and {len(files) - 1} other files); "
         f"pass --format (known: {', '.join(REGISTRY)})"

@@ -24,7 +24,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import pandas as pd
 
@@ -57,6 +57,10 @@ class Reader(ABC):
 
     name: ClassVar[str]
     description: ClassVar[str]
+
+    def __init__(self, options: Any = None) -> None:
+        """``options``: the format's own config (e.g. :class:`rmbuild.config.pdr.PdrConfig`), or None."""
+        self.options = options
 
     @classmethod
     @abstractmethod

@@ -1,0 +1,394 @@
+"""Reader for IPIN competition / GetSensorData logfiles (semicolon-separated text, optionally gzip'd).
+
+One logfile = one walk (walk_id = file name without extension). ``%`` lines are comments/header; every other
+line is ``TAG;AppTimestamp;...`` with the app timestamp (s) as the common clock. Used tags:
+ACCE, GYRO, AHRS (phone PDR), IMUI (foot-mounted MIMU22BT step increments, preferred when present), WIFI,
+POSI (ground-truth WGS84 fixes, converted to a local ENU frame in metres). MAGN lines are checked but not
+used. Every other tag is skipped with a count. docs/formats-real.md describes the format and the choices.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+import re
+import zlib
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.ingest import IngestConfig
+from rmbuild.config.pdr import PdrConfig
+from rmbuild.errors import InputError
+from rmbuild.io.formats.base import RawInput, Reader, register
+from rmbuild.pdr import (
+    ImuSignals,
+    poses_from_increments,
+    rotation_vector_quat,
+    run_pdr,
+    yaw_from_azimuth_deg,
+    yaw_from_quat,
+)
+
+FORMAT_NAME = "ipin"
+#: tag -> number of ';'-separated fields including the tag (WIFI: at least; the SSID may contain ';')
+_FIELDS = {"ACCE": 7, "GYRO": 7, "MAGN": 7, "AHRS": 10, "WIFI": 7, "POSI": 7, "IMUI": 18}
+#: tags of the GetSensorData app that rmbuild does not use (skipped with a count, like any other tag)
+KNOWN_UNUSED = (
+    "PRES", "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLE4", "BLUE", "RFID", "IMUX", "IMUL",
+)
+_TAG_LINE = re.compile(r"^[A-Z][A-Z0-9]{3};")
+_NAME_SUFFIXES = (".txt", ".txt.gz", ".log", ".log.gz", ".csv", ".csv.gz")
+#: our own schema's file names; never a logfile
+_SCHEMA_NAMES = re.compile(
+    r"^(walks|poses|wifi|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
+
+# WGS84 ellipsoid
+_A = 6378137.0
+_F = 1 / 298.257223563
+_E2 = _F * (2 - _F)
+
+
+def wgs84_to_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float, lon0_deg: float,
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """East/north in m of WGS84 points (ellipsoid height 0) in the local ENU frame at (lat0, lon0)."""
+    def ecef(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+        n = _A / np.sqrt(1 - _E2 * np.sin(lat) ** 2)
+        return np.stack([n * np.cos(lat) * np.cos(lon), n * np.cos(lat) * np.sin(lon),
+                         n * (1 - _E2) * np.sin(lat)])
+
+    lat = np.deg2rad(np.asarray(lat_deg, dtype=np.float64))
+    lon = np.deg2rad(np.asarray(lon_deg, dtype=np.float64))
+    la0, lo0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    d = ecef(lat, lon) - ecef(np.array(la0), np.array(lo0)).reshape(3, *([1] * lat.ndim))
+    e = -math.sin(lo0) * d[0] + math.cos(lo0) * d[1]
+    n = -math.sin(la0) * math.cos(lo0) * d[0] - math.sin(la0) * math.sin(lo0) * d[1] + math.cos(la0) * d[2]
+    return e, n
+
+
+def _walk_id(p: Path) -> str:
+    n = p.name
+    for suf in sorted(_NAME_SUFFIXES, key=len, reverse=True):
+        if n.lower().endswith(suf):
+            return n[: -len(suf)]
+    return p.stem
+
+
+def _read_text(p: Path) -> str:
+    try:
+        raw = p.read_bytes()
+        if p.name.lower().endswith(".gz"):
+            raw = gzip.decompress(raw)
+        return raw.decode("utf-8")
+    except EOFError:
+        raise InputError("gzip data ends early (truncated file)", str(p)) from None
+    except (gzip.BadGzipFile, zlib.error, OSError) as e:
+        raise InputError(f"cannot read file ({e})", str(p)) from None
+    except UnicodeDecodeError:
+        try:
+            return raw.decode("latin-1")
+        except UnicodeDecodeError as e:  # pragma: no cover - latin-1 decodes anything
+            raise InputError(f"not text (byte {e.start})", str(p)) from None
+
+
+def _first_lines(p: Path, n: int = 40) -> list[str]:
+    try:
+        opener = gzip.open if p.name.lower().endswith(".gz") else open
+        out: list[str] = []
+        with opener(p, "rt", encoding="utf-8", errors="replace") as fh:  # type: ignore[operator]
+            for _ in range(n):
+                line = fh.readline()
+                if not line:
+                    break
+                if line.strip():
+                    out.append(line.rstrip("\r\n"))
+        return out
+    except (OSError, EOFError, zlib.error):
+        return []
+
+
+def _looks_like_logfile(lines: list[str]) -> bool:
+    if not lines:
+        return False
+    if _TAG_LINE.match(lines[0]):
+        return True
+    if not lines[0].startswith("%"):
+        return False
+    return any("GetSensorData" in ln or _TAG_LINE.match(ln) for ln in lines)
+
+
+@dataclass
+class _Log:
+    """One parsed logfile: per-tag float arrays (rows sorted by app time) and their line numbers."""
+
+    path: Path
+    walk_id: str
+    device_id: str
+    num: dict[str, np.ndarray] = field(default_factory=dict)
+    line: dict[str, np.ndarray] = field(default_factory=dict)
+    wifi_text: list[tuple[str, str]] = field(default_factory=list)  # (ssid, bssid) per WIFI row, sorted
+    skipped: Counter = field(default_factory=Counter)
+    t_first: float = math.nan
+
+
+def _float(v: str, what: str, where: str) -> float:
+    try:
+        x = float(v)
+    except ValueError:
+        raise InputError(f"{what}: non-numeric value {v!r}", where) from None
+    if not math.isfinite(x):
+        raise InputError(f"{what}: non-finite value {v!r}", where)
+    return x
+
+
+def parse_logfile(path: Path) -> _Log:
+    """Parse one GetSensorData logfile (no PDR yet). Malformed lines -> InputError naming file:line."""
+    text = _read_text(path)
+    log = _Log(path, _walk_id(path), "")
+    rows: dict[str, list[list[float]]] = {t: [] for t in _FIELDS}
+    lnos: dict[str, list[int]] = {t: [] for t in _FIELDS}
+    wifi_text: list[tuple[str, str]] = []
+    manufacturer = model = ""
+    seen_data = False
+    for i, raw in enumerate(text.split("\n"), 1):
+        line = raw.rstrip("\r")
+        if not line.strip():
+            continue
+        if line[0] == "%":
+            m = re.match(r"^%\s*Model:\s*(.*?)\s*$", line)
+            if m:
+                model = m.group(1)
+            m = re.match(r"^%\s*Manufacturer:\s*(.*?)\s*$", line)
+            if m:
+                manufacturer = m.group(1)
+            continue
+        where = f"{path}:{i}"
+        if not _TAG_LINE.match(line):
+            what = "mixed formats?" if not seen_data else "expected 'TAG;AppTimestamp;...'"
+            raise InputError(f"not a GetSensorData line ({what})", where)
+        seen_data = True
+        parts = line.split(";")
+        tag = parts[0]
+        if tag not in _FIELDS:
+            log.skipped[tag] += 1
+            continue
+        if len(parts) > _FIELDS[tag] and parts[-1] == "" and tag != "WIFI":
+            parts = parts[:-1]   # a trailing ';'
+        n = _FIELDS[tag]
+        if tag == "WIFI":
+            if parts[-1] == "" and len(parts) > n:
+                parts = parts[:-1]
+            if len(parts) < n:
+                raise InputError(f"WIFI: expected {n} ';'-separated fields, got {len(parts)}", where)
+            # WIFI;t;ts;SSID;BSSID;freq;rss - the SSID may itself contain ';'
+            ssid = ";".join(parts[3:-3])
+            bssid = parts[-3].strip().lower()
+            if not re.fullmatch(r"[0-9a-f]{2}(:[0-9a-f]{2}){5}", bssid):
+                raise InputError(f"WIFI: BSSID {parts[-3]!r} is not a MAC address", where)
+            vals = [_float(parts[1], tag, where), _float(parts[2], tag, where), _float(parts[-2], tag, where),
+                    _float(parts[-1], tag, where)]
+            wifi_text.append((ssid, bssid))
+        else:
+            if len(parts) != n:
+                raise InputError(f"{tag}: expected {n} ';'-separated fields, got {len(parts)}", where)
+            vals = [_float(v, tag, where) for v in parts[1:]]
+            if tag == "POSI":
+                lat, lon = vals[2], vals[3]
+                if not -90.0 <= lat <= 90.0:
+                    raise InputError(f"POSI: latitude {lat} outside [-90, 90]", where)
+                if not -180.0 <= lon <= 180.0:
+                    raise InputError(f"POSI: longitude {lon} outside [-180, 180]", where)
+        rows[tag].append(vals)
+        lnos[tag].append(i)
+        if not math.isfinite(log.t_first) or vals[0] < log.t_first:
+            log.t_first = vals[0]
+    if not seen_data:
+        raise InputError("no data lines (empty or header-only logfile)", str(path))
+    log.device_id = " ".join(x for x in (manufacturer, model) if x)
+    for tag in _FIELDS:
+        arr = np.asarray(rows[tag], dtype=np.float64).reshape(len(rows[tag]), -1) if rows[tag] else \
+            np.zeros((0, 4 if tag == "WIFI" else _FIELDS[tag] - 1))
+        ln = np.asarray(lnos[tag], dtype=np.int64)
+        o = np.argsort(arr[:, 0], kind="stable") if len(arr) else np.zeros(0, dtype=np.int64)
+        log.num[tag], log.line[tag] = arr[o], ln[o]
+        if tag == "WIFI":
+            log.wifi_text = [wifi_text[j] for j in o]
+    log.skipped.update({"MAGN": len(log.num["MAGN"])} if len(log.num["MAGN"]) else {})
+    return log
+
+
+def _imu_signals(log: _Log) -> ImuSignals:
+    acc, gyr, ahrs = log.num["ACCE"], log.num["GYRO"], log.num["AHRS"]
+    if len(ahrs):
+        rv = ahrs[:, 5:8]
+        if np.any(np.sum(rv**2, axis=1) > 1.0 + 1e-3):
+            j = int(np.flatnonzero(np.sum(rv**2, axis=1) > 1.0 + 1e-3)[0])
+            raise InputError("AHRS: |RotVec| > 1 is not a rotation vector",
+                             f"{log.path}:{log.line['AHRS'][j]}")
+        if np.any(np.abs(rv) > 0):
+            yaw = yaw_from_quat(rotation_vector_quat(rv))
+        else:   # no rotation vector recorded: the app's yaw, a compass azimuth in degrees
+            yaw = yaw_from_azimuth_deg(ahrs[:, 4])
+        accuracy = ahrs[:, 8].astype(np.int64)
+    else:
+        yaw, accuracy = np.zeros(0), np.zeros(0, dtype=np.int64)
+    return ImuSignals(
+        t_acc_s=acc[:, 0], acc_mps2=acc[:, 2:5], t_yaw_s=ahrs[:, 0] if len(ahrs) else np.zeros(0),
+        yaw_abs_rad=yaw, yaw_accuracy=accuracy, t_gyro_s=gyr[:, 0], gyro_radps=gyr[:, 2:5],
+    )
+
+
+@register
+class IpinReader(Reader):
+    name = FORMAT_NAME
+    description = "IPIN / GetSensorData logfiles (';'-separated): phone IMU or foot IMU (IMUI), Wi-Fi, POSI"
+
+    def __init__(self, options: PdrConfig | None = None) -> None:
+        self.options = options if options is not None else PdrConfig()
+
+    @classmethod
+    def sniff(cls, files: list[Path]) -> bool:
+        if not files:
+            return False
+        for f in files:
+            if _SCHEMA_NAMES.match(f.name.lower()) or not f.name.lower().endswith(_NAME_SUFFIXES):
+                return False
+        return all(_looks_like_logfile(_first_lines(f)) for f in files)
+
+    def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
+        opts = self.options
+        logs: list[_Log] = []
+        seen: dict[str, Path] = {}
+        for f in files:
+            if _SCHEMA_NAMES.match(f.name.lower()):
+                raise InputError("an rmbuild schema table among GetSensorData logfiles (mixed formats)",
+                                 str(f))
+            log = parse_logfile(f)
+            if log.walk_id in seen:
+                raise InputError(f"duplicate logfile id {log.walk_id!r} (also {seen[log.walk_id]})", str(f))
+            seen[log.walk_id] = f
+            logs.append(log)
+        notes: list[str] = []
+        # ENU origin for POSI
+        if opts.ipin.origin_lat_deg is not None and opts.ipin.origin_lon_deg is not None:
+            lat0, lon0 = opts.ipin.origin_lat_deg, opts.ipin.origin_lon_deg
+        else:
+            first = next((lg for lg in logs if len(lg.num["POSI"])), None)
+            lat0, lon0 = ((float(first.num["POSI"][0, 2]), float(first.num["POSI"][0, 3])) if first
+                          else (0.0, 0.0))
+            if first is not None:
+                notes.append(f"POSI fixes in a local ENU frame at the first fix of {first.path.name}: "
+                             f"lat {lat0:.9f}, lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg "
+                             "set it)")
+        walks, poses, wifi, fixes = [], [], [], []
+        wifi_where, fix_where = [], []
+        skipped: Counter = Counter()
+        n_imui = n_pdr = 0
+        for lg in logs:
+            f = lg.path
+            imui = lg.num["IMUI"]
+            use_imui = opts.ipin.use_imui and len(imui) > 0
+            if use_imui:
+                sp, extra = self._imui_poses(lg, opts)
+                n_imui += 1
+            else:
+                if len(lg.num["ACCE"]) < 2:
+                    raise InputError("no ACCE (or IMUI) lines: cannot derive steps (no IMU data)", str(f))
+                if len(lg.num["AHRS"]) == 0 and opts.heading_source == "rotation_vector":
+                    raise InputError("no AHRS lines: no heading (pdr.heading_source = 'gyro' uses GYRO "
+                                     "instead)", str(f))
+                if len(lg.num["GYRO"]) < 2 and opts.heading_source == "gyro":
+                    raise InputError("no GYRO lines for pdr.heading_source = 'gyro' ('rotation_vector' "
+                                     "uses AHRS)", str(f))
+                try:
+                    sp = run_pdr(_imu_signals(lg), opts)
+                except ValueError as e:
+                    raise InputError(f"PDR failed: {e}", str(f)) from None
+                extra = {}
+                n_pdr += 1
+            pf = sp.to_frame(lg.walk_id)
+            for k, v in extra.items():
+                pf[k] = v
+            poses.append(pf)
+            w = lg.num["WIFI"]
+            if len(w) == 0 and opts.ipin.require_wifi:
+                raise InputError("no WIFI lines; pdr.ipin.require_wifi = false keeps Wi-Fi-less walks",
+                                 str(f))
+            wifi.append(pd.DataFrame({
+                "walk_id": pd.Series([lg.walk_id] * len(w), dtype=object), "t_s": w[:, 0] if len(w) else [],
+                "bssid": pd.Series([b for _, b in lg.wifi_text], dtype=object),
+                "rssi_dbm": w[:, 3] if len(w) else [], "freq_mhz": w[:, 2] if len(w) else [],
+                "ssid": pd.Series([s for s, _ in lg.wifi_text], dtype=object),
+            }))
+            wifi_where.extend(f"{f}:{ln}" for ln in lg.line["WIFI"])
+            p = lg.num["POSI"]
+            e, n = wgs84_to_enu(p[:, 2], p[:, 3], lat0, lon0) if len(p) else (np.zeros(0), np.zeros(0))
+            fixes.append(pd.DataFrame({
+                "walk_id": pd.Series([lg.walk_id] * len(p), dtype=object), "t_s": p[:, 0] if len(p) else [],
+                "x_m": e, "y_m": n,
+                "label": pd.Series([f"posi{int(c)}" for c in p[:, 1]] if len(p) else [], dtype=object),
+                "floor": pd.Series([str(int(v)) for v in p[:, 4]] if len(p) else [], dtype=object),
+                "building": pd.Series([str(int(v)) for v in p[:, 5]] if len(p) else [], dtype=object),
+            }))
+            fix_where.extend(f"{f}:{ln}" for ln in lg.line["POSI"])
+            walks.append({"walk_id": lg.walk_id, "device_id": lg.device_id, "user_id": "", "role": "",
+                          "source": FORMAT_NAME})
+            skipped.update(lg.skipped)
+        pose_df = pd.concat(poses, ignore_index=True)
+        if n_imui:
+            notes.append(f"{n_imui} walk(s) use the foot-mounted IMU's step increments (IMUI lines)")
+        if n_pdr:
+            notes.append(f"{n_pdr} walk(s) use phone PDR ({opts.step_detector} steps, {opts.heading_source} "
+                         f"heading, {opts.step_length_model} step length)")
+        pw, ps = pose_df["walk_id"].to_numpy(), pose_df["step"].to_numpy()
+        return RawInput(
+            walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source"]),
+            poses=pose_df,
+            wifi=pd.concat(wifi, ignore_index=True),
+            fixes=pd.concat(fixes, ignore_index=True),
+            skipped=dict(sorted(skipped.items())),
+            notes=notes,
+            where={
+                "walks": lambda i: str(seen[walks[i]["walk_id"]]),
+                "poses": lambda i: f"{seen[pw[i]]} (step {ps[i]})",
+                "wifi": lambda i: wifi_where[i],
+                "fixes": lambda i: fix_where[i],
+            },
+        )
+
+    @staticmethod
+    def _imui_poses(lg: _Log, opts: PdrConfig):
+        """Per-step poses from IMUI lines; duplicate packets and zero increments are skipped with counts."""
+        imui, lines = lg.num["IMUI"], lg.line["IMUI"]
+        # fields after the tag: t, packet, step, dx, dy, dz, dtheta_deg, cov[10]
+        dup = np.r_[False, np.diff(imui[:, 1]) == 0]
+        still = (imui[:, 3] == 0) & (imui[:, 4] == 0) & (imui[:, 6] == 0)
+        keep = ~dup & ~still
+        if dup.any():
+            lg.skipped["IMUI (repeated packet)"] += int(dup.sum())
+        if (still & ~dup).any():
+            lg.skipped["IMUI (no motion)"] += int((still & ~dup).sum())
+        m = imui[keep]
+        sign = -1.0 if opts.ipin.imui_z_down else 1.0
+        dx, dy = m[:, 3], sign * m[:, 4]
+        dth = sign * np.deg2rad(m[:, 6])
+        t0 = min(lg.t_first, float(m[0, 0]) if len(m) else lg.t_first)
+        sp = poses_from_increments(t0, m[:, 0], dx, dy, dth)
+        extra: dict[str, np.ndarray] = {}
+        if opts.ipin.imui_covariance:
+            cov = m[:, 7:17]   # upper triangle of the 4x4 covariance of (dx, dy, dz, dtheta), row by row
+            var = cov[:, [0, 4, 9]]
+            bad = np.flatnonzero((var < 0).any(axis=1))
+            if len(bad):
+                ln = lines[keep][bad[0]]
+                raise InputError("IMUI: negative variance in the covariance", f"{lg.path}:{ln}")
+            sd = np.sqrt(var)
+            extra = {
+                "odo_sigma_x_m": np.r_[np.nan, sd[:, 0]],
+                "odo_sigma_y_m": np.r_[np.nan, sd[:, 1]],
+                "odo_sigma_theta_rad": np.r_[np.nan, sd[:, 2]],
+            }
+        return sp, extra

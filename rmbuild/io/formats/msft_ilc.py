@@ -1,0 +1,458 @@
+"""Reader for Microsoft Indoor Location Competition 2.0 traces (``.txt`` / ``.txt.gz``, tab-separated).
+
+One trace = one walk (walk_id = file name without ``.txt``/``.txt.gz``). Phone PDR (:mod:`rmbuild.pdr`) turns
+TYPE_ACCELEROMETER + TYPE_ROTATION_VECTOR (+ TYPE_GYROSCOPE) into per-step poses; TYPE_WIFI rows become
+readings after the stale-row filter; TYPE_WAYPOINT rows are ground-truth fixes in the floor's frame
+(never fed to the optimiser as such). Every other line type is skipped with a count. docs/formats-real.md
+describes the format and the choices made here.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import re
+import zlib
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.ingest import IngestConfig
+from rmbuild.config.pdr import PdrConfig
+from rmbuild.errors import InputError
+from rmbuild.io.formats.base import RawInput, Reader, register
+from rmbuild.pdr import ImuSignals, rotation_vector_quat, run_pdr, yaw_from_quat
+
+FORMAT_NAME = "msft-ilc"
+#: files that sit beside the traces in the published layout; ignored (with a note) when passed in
+COMPANION_FILES = ("floor_info.json", "floor_image.png", "geojson_map.json")
+_DATA_LINE = re.compile(r"^\d{10,16}\tTYPE_[A-Z0-9_]+(\t|$)")
+
+#: line type -> number of tab-separated fields (time, type, values...)
+_USED = {
+    "TYPE_ACCELEROMETER": 6,    # x y z (m/s²) accuracy
+    "TYPE_GYROSCOPE": 6,        # x y z (rad/s) accuracy
+    "TYPE_ROTATION_VECTOR": 6,  # x y z (quaternion vector part) accuracy
+    "TYPE_WIFI": 7,             # ssid bssid rssi_dBm freq_MHz last_seen_unix_ms
+    "TYPE_WAYPOINT": 4,         # x y (m)
+}
+
+
+def _is_trace_name(p: Path) -> bool:
+    n = p.name.lower()
+    return n.endswith(".txt") or n.endswith(".txt.gz")
+
+
+def _walk_id(p: Path) -> str:
+    n = p.name
+    for suf in (".txt.gz", ".TXT.GZ", ".txt", ".TXT"):
+        if n.endswith(suf):
+            return n[: -len(suf)]
+    return p.stem
+
+
+def _read_bytes(p: Path) -> bytes:
+    """The whole file (gunzipped when the name ends in .gz); problems -> InputError."""
+    try:
+        raw = p.read_bytes()
+        return gzip.decompress(raw) if p.name.lower().endswith(".gz") else raw
+    except EOFError:
+        raise InputError("gzip data ends early (truncated file)", str(p)) from None
+    except (gzip.BadGzipFile, zlib.error, OSError) as e:
+        raise InputError(f"cannot read gzip data ({e})", str(p)) from None
+
+
+def _first_lines(p: Path, n: int = 3) -> list[str]:
+    """Up to ``n`` first non-empty lines, cheaply (empty list when unreadable)."""
+    try:
+        opener = gzip.open if p.name.lower().endswith(".gz") else open
+        out: list[str] = []
+        with opener(p, "rt", encoding="utf-8", errors="replace") as fh:  # type: ignore[operator]
+            for _ in range(50):
+                line = fh.readline()
+                if not line:
+                    break
+                if line.strip():
+                    out.append(line.rstrip("\r\n"))
+                    if len(out) >= n:
+                        break
+        return out
+    except (OSError, EOFError, zlib.error):
+        return []
+
+
+def _looks_like_trace(lines: list[str]) -> bool:
+    if not lines:
+        return False
+    first = lines[0]
+    return first.startswith("#\tstartTime:") or bool(_DATA_LINE.match(first))
+
+
+@dataclass
+class _Stream:
+    """Rows of one line type, sorted by time: t_s (n,), values (n, k) float, accuracy (n,), line (n,)."""
+
+    t_s: np.ndarray
+    values: np.ndarray
+    accuracy: np.ndarray
+    line: np.ndarray
+
+
+@dataclass
+class _Rows:
+    """One used line type in file order: unix ms, numeric fields, text fields, 1-based line numbers."""
+
+    t_ms: np.ndarray
+    num: np.ndarray          # (n, k) float64, the type's numeric value fields (see _NUM_COLS)
+    text: np.ndarray         # (n, j) str, the type's text fields (Wi-Fi: ssid, bssid)
+    line: np.ndarray
+
+
+@dataclass
+class _Trace:
+    walk_id: str
+    device_id: str
+    floor: str
+    acc: _Stream
+    gyro: _Stream
+    rot: _Stream
+    wifi: pd.DataFrame
+    wifi_lines: np.ndarray
+    waypoints: pd.DataFrame
+    waypoint_lines: np.ndarray
+    skipped: Counter
+    n_wifi_stale: int
+
+
+#: per used type: field positions of the numeric values and of the text values
+_NUM_COLS = {
+    "TYPE_ACCELEROMETER": [2, 3, 4, 5],
+    "TYPE_GYROSCOPE": [2, 3, 4, 5],
+    "TYPE_ROTATION_VECTOR": [2, 3, 4, 5],
+    "TYPE_WIFI": [4, 5, 6],
+    "TYPE_WAYPOINT": [2, 3],
+}
+_TEXT_COLS = {"TYPE_WIFI": [2, 3]}
+_HEADER_RE = re.compile(rb"^#[^\n]*", re.M)
+
+
+def _numeric(table: np.ndarray, linenos: np.ndarray, path: Path, what: str, dtype: type = np.float64,
+             ) -> np.ndarray:
+    """``table`` (n, k) of strings as numbers; a non-numeric / non-finite value -> InputError at its line."""
+    try:
+        arr = table.astype(dtype)
+        if dtype is np.float64 and not np.isfinite(arr).all():
+            raise ValueError
+        return arr
+    except ValueError:
+        for row, ln in zip(table, linenos):
+            for v in row:
+                try:
+                    x = dtype(v)
+                    if dtype is np.float64 and not np.isfinite(x):
+                        raise ValueError
+                except ValueError:
+                    raise InputError(f"{what}: non-numeric or non-finite value {str(v)!r}",
+                                     f"{path}:{ln}") from None
+        raise  # pragma: no cover - the loop always finds the culprit
+
+
+def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
+    """Vectorised parse of a well-formed trace; None when anything looks off (the slow path then finds and
+    reports the problem with its line number).
+
+    Lines are located and classified with numpy on the raw bytes; the lines of each used type are cut out
+    and handed to pandas' C parser in one block.
+    """
+    text = data.replace(b"\r\n", b"\n")
+    if not text.endswith(b"\n"):
+        text += b"\n"
+    buf = np.frombuffer(text, dtype=np.uint8)
+    nl = np.flatnonzero(buf == 10)
+    starts = np.concatenate(([0], nl[:-1] + 1))
+    ends = nl                                     # exclusive end (the newline)
+    first = buf[starts]
+    data = (first != ord("#")) & (starts < ends)
+    if not data.any():
+        return None
+    ds, de = starts[data], ends[data]
+    line_no = np.flatnonzero(data) + 1
+    tabs = np.flatnonzero(buf == 9)
+    k = np.searchsorted(tabs, ds)
+    if k.max(initial=0) >= len(tabs):
+        return None
+    tab1 = tabs[k]
+    # "<digits>\tTYPE_..." : a tab inside the line, 1-16 digits before it, "TYPE_" after it
+    n_dig = tab1 - ds
+    if not ((tab1 < de) & (n_dig > 0) & (n_dig <= 16)).all():
+        return None
+    head = buf[np.minimum(ds[:, None] + np.arange(16)[None, :], len(buf) - 1)]
+    if not ((head >= 48) & (head <= 57) | (np.arange(16)[None, :] >= n_dig[:, None])).all():
+        return None
+    width = 64
+    pos = np.minimum(tab1[:, None] + 1 + np.arange(width)[None, :], len(buf) - 1)
+    key = buf[pos]
+    key = np.where(pos < de[:, None], key, 9)     # pad past the line end with a tab
+    is_tab = key == 9
+    if not is_tab.any(axis=1).all():
+        return None
+    key = np.where(np.arange(width)[None, :] > np.argmax(is_tab, axis=1)[:, None], 0, key)  # the type only
+    if not (key[:, :5] == np.frombuffer(b"TYPE_", np.uint8)).all():
+        return None
+    kv = np.ascontiguousarray(key).view(np.dtype((np.void, width))).ravel()
+    uniq, inv, counts = np.unique(kv, return_inverse=True, return_counts=True)
+    names = []
+    for u in uniq:
+        b = bytes(u)
+        names.append(b[: b.index(b"\t")].decode("ascii", "replace") if b"\t" in b else None)
+    if any(n is None for n in names):
+        return None
+    # per byte: the code of its line's type (1 + index into _USED; 0 = unused / comment)
+    used = list(_USED)
+    code_of_uniq = np.array([used.index(n) + 1 if n in _USED else 0 for n in names], dtype=np.uint8)
+    line_code = np.zeros(len(starts), dtype=np.uint8)
+    line_code[line_no - 1] = code_of_uniq[inv.ravel()]
+    byte_code = np.repeat(line_code, ends - starts + 1)
+    out: dict[str, _Rows] = {}
+    skipped: Counter = Counter()
+    for j, name in enumerate(names):
+        if name not in _USED:
+            skipped[name] += int(counts[j])
+    for typ, nfields in _USED.items():
+        text_cols = _TEXT_COLS.get(typ, [])
+        js = [j for j, n in enumerate(names) if n == typ]
+        sel = np.isin(inv, js) if js else np.zeros(len(ds), dtype=bool)
+        line = line_no[sel]
+        if len(line) == 0:
+            out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
+                             np.zeros((0, len(text_cols)), dtype=str), line)
+            continue
+        block = buf[byte_code == used.index(typ) + 1].tobytes()
+        try:
+            df = pd.read_csv(io.BytesIO(block), sep="\t", header=None, names=list(range(nfields)),
+                             dtype={c: str for c in text_cols}, keep_default_na=False, na_values={},
+                             quoting=csv.QUOTE_NONE, engine="c", encoding="utf-8", skip_blank_lines=False)
+            if len(df) != len(line):
+                return None
+            t_ms = df[0].to_numpy(dtype=np.int64)
+            num = df[_NUM_COLS[typ]].to_numpy(dtype=np.float64)
+        except (ValueError, TypeError, pd.errors.ParserError):
+            return None
+        if not np.isfinite(num).all():
+            return None
+        # too few fields: pandas fills the missing ones with "" (text) or NaN (numbers, caught above)
+        if text_cols and (df[text_cols[-1]].to_numpy(dtype=str) == "").any() and nfields - 1 in text_cols:
+            return None
+        txt = df[text_cols].to_numpy(dtype=str) if text_cols else np.zeros((len(df), 0), dtype=str)
+        out[typ] = _Rows(t_ms, num, txt, line)
+    return out, skipped
+
+
+def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
+    """Line-by-line parse with exact error messages (file:line)."""
+    rows: dict[str, list[list[str]]] = {k: [] for k in _USED}
+    lnos: dict[str, list[int]] = {k: [] for k in _USED}
+    skipped: Counter = Counter()
+    for i, line in enumerate(text.split("\n"), 1):
+        line = line.rstrip("\r")
+        if not line or line.isspace() or line[0] == "#":
+            continue
+        parts = line.split("\t")
+        if not (len(parts) >= 2 and parts[0].isdigit() and parts[1].startswith("TYPE_")):
+            if parts[0].isdigit() and (len(parts) < 2 or "TYPE_".startswith(parts[1])):
+                raise InputError("truncated line: expected '<unix_ms><TAB>TYPE_...<TAB><values>'",
+                                 f"{path}:{i}")
+            raise InputError("not a Microsoft ILC trace line (expected '<unix_ms><TAB>TYPE_...'; "
+                             "mixed formats?)", f"{path}:{i}")
+        typ = parts[1]
+        bucket = rows.get(typ)
+        if bucket is None:
+            skipped[typ] += 1
+            continue
+        if len(parts) != _USED[typ]:
+            raise InputError(f"{typ}: expected {_USED[typ]} tab-separated fields, got {len(parts)}",
+                             f"{path}:{i}")
+        bucket.append(parts)
+        lnos[typ].append(i)
+    if not any(rows.values()) and not skipped:
+        raise InputError("no data lines (empty or header-only trace)", str(path))
+    out: dict[str, _Rows] = {}
+    for typ in _USED:
+        ln = np.asarray(lnos[typ], dtype=np.int64)
+        text_cols = _TEXT_COLS.get(typ, [])
+        if not rows[typ]:
+            out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
+                             np.zeros((0, len(text_cols)), dtype=str), ln)
+            continue
+        tab = np.array(rows[typ], dtype=str)
+        t_ms = _numeric(tab[:, :1], ln, path, typ, np.int64)[:, 0]
+        num = _numeric(tab[:, _NUM_COLS[typ]], ln, path, typ)
+        out[typ] = _Rows(t_ms, num, tab[:, text_cols], ln)
+    return out, skipped
+
+
+def _stream(r: _Rows, ncols: int, has_accuracy: bool) -> _Stream:
+    o = np.argsort(r.t_ms, kind="stable")
+    acc = (r.num[o, ncols].astype(np.int64) if has_accuracy else np.full(len(o), -1, dtype=np.int64))
+    return _Stream(r.t_ms[o] / 1000.0, r.num[o, :ncols], acc, r.line[o])
+
+
+def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
+    """Parse one trace file into time-sorted series and tables (no PDR yet)."""
+    raw = _read_bytes(path)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text (byte {e.start})", str(path)) from None
+    device = floor = ""
+    for h in _HEADER_RE.findall(raw[:20000]):
+        hs = h.decode("utf-8", "replace")
+        m = re.search(r"\tModel:([^\t]*)", hs)
+        if m:
+            device = m.group(1).strip()
+        m = re.search(r"\tFloorName:([^\t]*)", hs)
+        if m:
+            floor = m.group(1).strip()
+    fast = _rows_fast(raw)
+    rows, skipped = fast if fast is not None else _rows_slow(text, path)
+    wid = _walk_id(path)
+
+    acc = _stream(rows["TYPE_ACCELEROMETER"], 3, True)
+    gyr = _stream(rows["TYPE_GYROSCOPE"], 3, True)
+    rot = _stream(rows["TYPE_ROTATION_VECTOR"], 3, True)
+    bad = np.flatnonzero(np.sum(rot.values**2, axis=1) > 1.0 + 1e-3)
+    if len(bad):
+        raise InputError("TYPE_ROTATION_VECTOR: |(x, y, z)| > 1 is not a rotation vector",
+                         f"{path}:{rot.line[bad[0]]}")
+
+    w = rows["TYPE_WIFI"]
+    n_stale = 0
+    bssid = np.char.lower(np.char.strip(w.text[:, 1].astype(str))) if len(w.t_ms) else np.zeros(0, dtype=str)
+    empty = np.flatnonzero(bssid == "")
+    if len(empty):
+        raise InputError("TYPE_WIFI: empty BSSID", f"{path}:{w.line[empty[0]]}")
+    fresh = (w.t_ms - w.num[:, 2]) <= opts.msft_ilc.max_wifi_age_s * 1000.0
+    n_stale = int((~fresh).sum())
+    idx = np.flatnonzero(fresh)
+    idx = idx[np.argsort(w.t_ms[idx], kind="stable")]
+    wifi = pd.DataFrame({
+        "walk_id": pd.Series([wid] * len(idx), dtype=object), "t_s": w.t_ms[idx] / 1000.0,
+        "bssid": pd.Series(bssid[idx], dtype=object), "rssi_dbm": w.num[idx, 0], "freq_mhz": w.num[idx, 1],
+        "ssid": pd.Series(w.text[idx, 0] if len(idx) else [], dtype=object),
+    })
+
+    wp = _stream(rows["TYPE_WAYPOINT"], 2, False)
+    waypoints = pd.DataFrame({
+        "walk_id": pd.Series([wid] * len(wp.t_s), dtype=object), "t_s": wp.t_s,
+        "x_m": wp.values[:, 0], "y_m": wp.values[:, 1],
+        "label": pd.Series([f"wp{k}" for k in range(len(wp.t_s))], dtype=object),
+        "floor": pd.Series([floor] * len(wp.t_s), dtype=object),
+    })
+    return _Trace(wid, device, floor, acc, gyr, rot, wifi, w.line[idx], waypoints, wp.line, skipped, n_stale)
+
+
+@register
+class MsftIlcReader(Reader):
+    name = FORMAT_NAME
+    description = "Microsoft Indoor Location Competition 2.0 traces (.txt/.txt.gz): phone IMU + Wi-Fi, PDR"
+
+    def __init__(self, options: PdrConfig | None = None) -> None:
+        self.options = options if options is not None else PdrConfig()
+
+    @classmethod
+    def sniff(cls, files: list[Path]) -> bool:
+        traces = [f for f in files if f.name not in COMPANION_FILES]
+        if not traces or not all(_is_trace_name(f) for f in traces):
+            return False
+        return all(_looks_like_trace(_first_lines(f, 1)) for f in traces)
+
+    def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
+        opts = self.options
+        traces = [f for f in files if f.name not in COMPANION_FILES]
+        notes: list[str] = []
+        if len(traces) < len(files):
+            notes.append(f"ignored {len(files) - len(traces)} floor companion file(s) "
+                         f"({', '.join(COMPANION_FILES)})")
+        if not traces:
+            raise InputError("no trace files (*.txt, *.txt.gz) among the inputs", str(files[0]))
+        for f in traces:
+            if not _is_trace_name(f):
+                raise InputError("not a Microsoft ILC trace (expected *.txt or *.txt.gz; mixed formats?)",
+                                 str(f))
+        seen: dict[str, Path] = {}
+        walks, poses, wifi, fixes = [], [], [], []
+        wifi_lines, fix_lines = [], []
+        skipped: Counter = Counter()
+        n_stale = n_wifi = 0
+        for f in traces:
+            tr = parse_trace(f, opts)
+            if tr.walk_id in seen:
+                raise InputError(f"duplicate trace id {tr.walk_id!r} (also {seen[tr.walk_id]})", str(f))
+            seen[tr.walk_id] = f
+            if len(tr.acc.t_s) < 2:
+                raise InputError("no TYPE_ACCELEROMETER lines: cannot derive steps (no IMU data)", str(f))
+            if len(tr.rot.t_s) == 0 and opts.heading_source == "rotation_vector":
+                raise InputError("no TYPE_ROTATION_VECTOR lines: no heading (pdr.heading_source = 'gyro' "
+                                 "uses the gyroscope instead)", str(f))
+            if len(tr.wifi) == 0 and opts.msft_ilc.require_wifi:
+                why = "every row stale" if tr.n_wifi_stale else "no TYPE_WIFI lines"
+                raise InputError(f"no usable Wi-Fi readings ({why}); pdr.msft_ilc.require_wifi = false keeps "
+                                 "Wi-Fi-less walks", str(f))
+            imu = ImuSignals(
+                t_acc_s=tr.acc.t_s, acc_mps2=tr.acc.values,
+                t_yaw_s=tr.rot.t_s, yaw_abs_rad=yaw_from_quat(rotation_vector_quat(tr.rot.values)),
+                yaw_accuracy=tr.rot.accuracy, t_gyro_s=tr.gyro.t_s, gyro_radps=tr.gyro.values,
+            )
+            try:
+                steps = run_pdr(imu, opts)
+            except ValueError as e:
+                raise InputError(f"PDR failed: {e}", str(f)) from None
+            poses.append(steps.to_frame(tr.walk_id))
+            wifi.append(tr.wifi)
+            wifi_lines.append(tr.wifi_lines)
+            fixes.append(tr.waypoints)
+            fix_lines.append(tr.waypoint_lines)
+            walks.append({"walk_id": tr.walk_id, "device_id": tr.device_id, "user_id": "", "role": "",
+                          "source": FORMAT_NAME})
+            skipped.update(tr.skipped)
+            n_stale += tr.n_wifi_stale
+            n_wifi += tr.n_wifi_stale + len(tr.wifi)
+        if n_wifi:
+            notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
+                         f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
+        pose_df = pd.concat(poses, ignore_index=True)
+        notes.append(f"PDR: {len(pose_df) - len(poses):,} steps in {len(poses)} walks ({opts.step_detector} "
+                     f"steps, {opts.heading_source} heading, {opts.step_length_model} step length)")
+        return RawInput(
+            walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source"]),
+            poses=pose_df,
+            wifi=pd.concat(wifi, ignore_index=True),
+            fixes=pd.concat(fixes, ignore_index=True),
+            skipped=dict(sorted(skipped.items())),
+            notes=notes,
+            where=where_functions(seen, pose_df, walks, wifi, wifi_lines, fixes, fix_lines),
+        )
+
+
+def where_functions(paths: dict[str, Path], pose_df: pd.DataFrame, walks: list[dict],
+                    wifi: list[pd.DataFrame], wifi_lines: list[np.ndarray], fixes: list[pd.DataFrame],
+                    fix_lines: list[np.ndarray]) -> dict:
+    """``RawInput.where``: row position -> "file:line" (poses: "file (PDR step k)")."""
+    wfile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]) if len(d) else "", dtype=object)
+                            for d in wifi]) if wifi else np.zeros(0, dtype=object)
+    wline = np.concatenate(wifi_lines) if wifi_lines else np.zeros(0, dtype=np.int64)
+    ffile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]) if len(d) else "", dtype=object)
+                            for d in fixes]) if fixes else np.zeros(0, dtype=object)
+    fline = np.concatenate(fix_lines) if fix_lines else np.zeros(0, dtype=np.int64)
+    pw = pose_df["walk_id"].to_numpy()
+    ps = pose_df["step"].to_numpy()
+    return {
+        "walks": lambda i: str(paths[walks[i]["walk_id"]]),
+        "poses": lambda i: f"{paths[pw[i]]} (PDR step {ps[i]})",
+        "wifi": lambda i: f"{wfile[i]}:{wline[i]}",
+        "fixes": lambda i: f"{ffile[i]}:{fline[i]}",
+    }

@@ -1,0 +1,231 @@
+"""Microsoft ILC 2.0 trace reader: tiny fixture, malformed input, sniffing, and real data when present."""
+
+from __future__ import annotations
+
+import gzip
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rmbuild.config.ingest import IngestConfig
+from rmbuild.config.pdr import MsftIlcConfig, PdrConfig
+from rmbuild.errors import InputError
+from rmbuild.io.formats.ipin import IpinReader
+from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
+
+FIXTURE = Path(__file__).resolve().parent / "fixtures" / "msft_ilc" / "tiny_trace.txt"
+DATASETS = Path(__file__).resolve().parents[2] / "shared" / "datasets"
+ILC = DATASETS / "msft-ilc20" / "data"
+
+
+def read(files, options: PdrConfig | None = None):
+    return MsftIlcReader(options).read([Path(f) for f in files], IngestConfig())
+
+
+def fixture_lines() -> list[str]:
+    return FIXTURE.read_text(encoding="utf-8").splitlines()
+
+
+def write(tmp_path: Path, lines: list[str], name: str = "trace.txt") -> Path:
+    p = tmp_path / name
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+def line_of(lines: list[str], typ: str, k: int = 0) -> int:
+    """0-based index of the k-th line of type ``typ``."""
+    return [i for i, ln in enumerate(lines) if ln.split("\t")[1:2] == [typ]][k]
+
+
+def test_fixture_reads():
+    raw = read([FIXTURE])
+    assert list(raw.walks["walk_id"]) == ["tiny_trace"]
+    assert raw.walks["device_id"].iat[0] == "PHONE1" and raw.walks["source"].iat[0] == "msft-ilc"
+    p = raw.poses
+    assert len(p) == 21   # start + 20 steps
+    assert (p["x_m"].iat[0], p["y_m"].iat[0], p["heading_rad"].iat[0]) == (0, 0, 0)
+    # 10 steps east, then 10 north (a left turn of 90°)
+    assert p["heading_rad"].iat[-1] == pytest.approx(np.pi / 2, abs=0.05)
+    assert p["x_m"].iat[-1] == pytest.approx(10 * 0.7, rel=0.15)
+    assert p["yaw_abs_rad"].iat[3] == pytest.approx(0.0, abs=0.05)            # east in ENU
+    assert np.all(np.diff(p["t_s"]) > 0)
+    # Wi-Fi: 4 scans x 5 rows, the stale row of each dropped; empty SSID kept
+    assert len(raw.wifi) == 16 and raw.wifi["bssid"].str.match(r"^0a(:00){4}:0[0-3]$").all()
+    assert (raw.wifi["ssid"] == "").sum() == 4
+    assert any("dropped 4 of 20 Wi-Fi rows" in n for n in raw.notes)
+    # waypoints are ground truth fixes in the floor frame
+    assert list(raw.fixes["x_m"]) == [50.0, 55.0, 55.0] and list(raw.fixes["floor"]) == ["F1"] * 3
+    assert raw.skipped == {"TYPE_ACCELEROMETER_UNCALIBRATED": 60, "TYPE_BEACON": 1, "TYPE_BLUE": 24}
+    where = raw.where["wifi"](0)
+    assert where.startswith(str(FIXTURE)) and int(where.rsplit(":", 1)[1]) > 4
+
+
+def test_gzip_and_wifi_age_option(tmp_path):
+    gz = tmp_path / "tiny_trace.txt.gz"
+    gz.write_bytes(gzip.compress(FIXTURE.read_bytes()))
+    a, b = read([FIXTURE]), read([gz])
+    assert a.poses.drop(columns="walk_id").equals(b.poses.drop(columns="walk_id"))
+    assert list(b.walks["walk_id"]) == ["tiny_trace"]
+    keep_all = read([gz], PdrConfig(msft_ilc=MsftIlcConfig(max_wifi_age_s=60.0)))
+    assert len(keep_all.wifi) == 20
+
+
+def test_out_of_order_lines_are_sorted(tmp_path):
+    lines = fixture_lines()
+    body = lines[4:-1]
+    shuffled = lines[:4] + body[::-1] + lines[-1:]
+    a, b = read([FIXTURE]), read([write(tmp_path, shuffled, "tiny_trace.txt")])
+    np.testing.assert_allclose(a.poses["x_m"], b.poses["x_m"])
+    assert a.wifi[["t_s", "bssid"]].sort_values(["t_s", "bssid"]).to_numpy().tolist() == \
+        b.wifi[["t_s", "bssid"]].sort_values(["t_s", "bssid"]).to_numpy().tolist()
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda ls, i: ls.__setitem__(i, ls[i].rsplit("\t", 2)[0]), "expected 6 tab-separated fields, got 4"),
+    (lambda ls, i: ls.__setitem__(i, ls[i] + "\t7"), "expected 6 tab-separated fields, got 7"),
+    (lambda ls, i: ls.__setitem__(i, ls[i].replace("\t3", "\tabc", 1) if ls[i].endswith("\t3") else ls[i]),
+     "non-numeric"),
+    (lambda ls, i: ls.__setitem__(i, ls[i].split("\t")[0]), "truncated line"),
+    (lambda ls, i: ls.__setitem__(i, "garbage line"), "not a Microsoft ILC trace line"),
+    (lambda ls, i: ls.__setitem__(i, ls[i].replace("TYPE_ACCELEROMETER\t", "TYPE_ACCELEROMETER\tnan\t", 1)
+                                  .rsplit("\t", 1)[0]), "non-finite"),
+])
+def test_malformed_accelerometer_line_names_file_and_line(tmp_path, mutate, message):
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_ACCELEROMETER", 7)
+    mutate(lines, i)
+    p = write(tmp_path, lines)
+    with pytest.raises(InputError) as e:
+        read([p])
+    assert message in str(e.value)
+    assert e.value.where == f"{p}:{i + 1}"
+    assert "\n" not in str(e.value)
+
+
+def test_malformed_wifi_and_waypoint_lines(tmp_path):
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_WIFI", 2)
+    f = lines[i].split("\t")
+    f[4] = "loud"
+    lines[i] = "\t".join(f)
+    p = write(tmp_path, lines)
+    with pytest.raises(InputError, match="TYPE_WIFI: non-numeric") as e:
+        read([p])
+    assert e.value.where == f"{p}:{i + 1}"
+    lines = fixture_lines()
+    j = line_of(lines, "TYPE_WAYPOINT", 1)
+    lines[j] = lines[j] + "\t3.0"
+    p = write(tmp_path, lines)
+    with pytest.raises(InputError, match="TYPE_WAYPOINT: expected 4") as e:
+        read([p])
+    assert e.value.where == f"{p}:{j + 1}"
+
+
+def test_bad_rotation_vector(tmp_path):
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_ROTATION_VECTOR", 5)
+    f = lines[i].split("\t")
+    f[2:5] = ["0.9", "0.9", "0.9"]
+    lines[i] = "\t".join(f)
+    p = write(tmp_path, lines)
+    with pytest.raises(InputError, match="not a rotation vector") as e:
+        read([p])
+    assert e.value.where == f"{p}:{i + 1}"
+
+
+def test_file_without_wifi_or_imu(tmp_path):
+    lines = fixture_lines()
+    no_wifi = write(tmp_path, [ln for ln in lines if "\tTYPE_WIFI\t" not in ln], "nowifi.txt")
+    with pytest.raises(InputError, match="no usable Wi-Fi") as e:
+        read([no_wifi])
+    assert e.value.where == str(no_wifi)
+    ok = read([no_wifi], PdrConfig(msft_ilc=MsftIlcConfig(require_wifi=False)))
+    assert len(ok.wifi) == 0 and len(ok.poses) == 21
+    no_acc = write(tmp_path, [ln for ln in lines if "\tTYPE_ACCELEROMETER\t" not in ln], "noacc.txt")
+    with pytest.raises(InputError, match="no TYPE_ACCELEROMETER") as e:
+        read([no_acc])
+    no_rot = write(tmp_path, [ln for ln in lines if "\tTYPE_ROTATION_VECTOR\t" not in ln], "norot.txt")
+    with pytest.raises(InputError, match="no TYPE_ROTATION_VECTOR"):
+        read([no_rot], PdrConfig(heading_source="rotation_vector"))
+    header_only = write(tmp_path, [ln for ln in lines if ln.startswith("#")], "header.txt")
+    with pytest.raises(InputError, match="no data lines"):
+        read([header_only])
+
+
+def test_bad_gzip(tmp_path):
+    bad = tmp_path / "bad.txt.gz"
+    bad.write_bytes(b"this is not gzip data at all")
+    with pytest.raises(InputError, match="gzip") as e:
+        read([bad])
+    assert e.value.where == str(bad)
+    cut = tmp_path / "cut.txt.gz"
+    cut.write_bytes(gzip.compress(FIXTURE.read_bytes())[:3000])
+    with pytest.raises(InputError, match="truncated"):
+        read([cut])
+
+
+def test_sniff_is_specific(tmp_path):
+    assert MsftIlcReader.sniff([FIXTURE])
+    ipin = Path(__file__).resolve().parent / "fixtures" / "ipin" / "tiny_logfile.txt"
+    assert not MsftIlcReader.sniff([ipin]) and not MsftIlcReader.sniff([FIXTURE, ipin])
+    assert not IpinReader.sniff([FIXTURE])
+    for name in ("poses.csv", "wifi.csv", "walks.csv", "fixes.csv"):
+        f = tmp_path / name
+        f.write_text("walk_id,t_s\nw,1.0\n")
+        assert not MsftIlcReader.sniff([f]) and not IpinReader.sniff([f])
+    # companion files of the published layout are ignored, anything else is an error
+    (tmp_path / "floor_info.json").write_text("{}")
+    assert MsftIlcReader.sniff([FIXTURE, tmp_path / "floor_info.json"])
+    raw = read([FIXTURE, tmp_path / "floor_info.json"])
+    assert any("companion" in n for n in raw.notes)
+    with pytest.raises(InputError, match="mixed formats"):
+        read([FIXTURE, ipin])
+
+
+def test_duplicate_walk_ids(tmp_path):
+    gz = tmp_path / "tiny_trace.txt.gz"
+    gz.write_bytes(gzip.compress(FIXTURE.read_bytes()))
+    with pytest.raises(InputError, match="duplicate trace id"):
+        read([FIXTURE, gz])
+
+
+def test_parse_trace_fast_and_slow_paths_agree(tmp_path):
+    from rmbuild.io.formats import msft_ilc
+
+    raw = FIXTURE.read_bytes()
+    fast = msft_ilc._rows_fast(raw)
+    assert fast is not None
+    slow = msft_ilc._rows_slow(raw.decode(), FIXTURE)
+    assert fast[1] == slow[1]
+    for k in fast[0]:
+        np.testing.assert_array_equal(fast[0][k].t_ms, slow[0][k].t_ms)
+        np.testing.assert_array_equal(fast[0][k].line, slow[0][k].line)
+        np.testing.assert_allclose(fast[0][k].num, slow[0][k].num)
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not ILC.is_dir(), reason="../shared/datasets/msft-ilc20 not present")
+def test_real_site2_f4_pdr_against_waypoints():
+    files = sorted((ILC / "site2" / "F4" / "path_data_files").glob("*.txt.gz"))
+    assert len(files) == 26
+    t = time.perf_counter()
+    raw = read(files)
+    assert time.perf_counter() - t < 40
+    assert raw.walks["device_id"].eq("PBCM10").all()
+    assert len(raw.fixes) == 193
+    assert "TYPE_BEACON" in raw.skipped
+    # walked distance / waypoint path length between the first and last waypoint, per walk
+    ratios = []
+    for wid, fx in raw.fixes.groupby("walk_id"):
+        p = raw.poses[raw.poses["walk_id"] == wid]
+        inside = (p["t_s"] > fx["t_s"].min()) & (p["t_s"] <= fx["t_s"].max())
+        walked = inside.sum() * PdrConfig().step_length_m
+        path = np.hypot(np.diff(fx["x_m"]), np.diff(fx["y_m"])).sum()
+        ratios.append(walked / path)
+    assert 0.9 < np.median(ratios) < 1.15
+    assert np.percentile(ratios, 10) > 0.75 and np.percentile(ratios, 90) < 1.35
+    # stale rows: the filter drops roughly half
+    tr = parse_trace(files[0], PdrConfig())
+    assert tr.n_wifi_stale > 0
