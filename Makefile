@@ -26,11 +26,19 @@ venv: $(STAMP)
 run: $(STAMP)
 	$(RM_CLI) simulate $(RUN_DIR)/input --preset $(PRESET) --seed $(SEED) --force
 	$(RM_CLI) ingest $(RUN_DIR)/input -w $(RUN_DIR)/workspace --force
+	$(RM_CLI) optimize -w $(RUN_DIR)/workspace
+	$(RM_CLI) export-map -w $(RUN_DIR)/workspace
+	$(RM_CLI) evaluate -w $(RUN_DIR)/workspace
+	$(RM_CLI) view -w $(RUN_DIR)/workspace --save $(RUN_DIR)/workspace/view.rrd
+	$(RM_CLI) report -w $(RUN_DIR)/workspace
 	@echo
 	@echo "results:"
 	@echo "  input files (simulated venue + truth/): $(RUN_DIR)/input"
 	@echo "  workspace:                              $(RUN_DIR)/workspace"
 	@echo "  stage reports:                          $(RUN_DIR)/workspace/reports/*.json"
+	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
+	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
+	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
 
 ## make test: ruff + the pytest suite
 test: $(STAMP)

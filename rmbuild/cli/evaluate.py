@@ -1,0 +1,36 @@
+"""`rmbuild evaluate`."""
+
+from __future__ import annotations
+
+import click
+
+from rmbuild.cli.options import common_options, start, workspace_option
+
+
+@click.command()
+@workspace_option
+@click.option("--test-walks", default=None, metavar="ID,ID,...",
+              help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
+@click.option("--localizer", "localizers", multiple=True,
+              help="Localizer(s) to run side by side (repeatable; default from config: knn, wknn).")
+@common_options
+def evaluate(workspace, test_walks, localizers, config_path, force, quiet, verbose):
+    """Localize held-out walks with maps built from optimised, true and raw positions; report errors."""
+    start(verbose, quiet)
+    from pathlib import Path
+
+    from rmbuild.cli.progress import progress_display
+    from rmbuild.config import load_stage_config
+    from rmbuild.stages import evaluate as stage
+
+    cfg = load_stage_config("evaluate", config_path,
+                            overrides={"localizers": list(localizers) if localizers else None})
+    map_toml = Path(workspace) / "map" / "config.toml"
+    # the maps are rasterised like export-map did, unless a config file says otherwise
+    map_cfg = load_stage_config("map", config_path if config_path else (map_toml if map_toml.is_file() else None))
+    walks = [w.strip() for w in test_walks.split(",") if w.strip()] if test_walks else None
+    with progress_display(quiet) as progress:
+        report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress)
+    if not quiet:
+        click.echo(table)
+        click.echo(f"report: {workspace}/reports/evaluate.json, CDF plot: {workspace}/evaluate/cdf.png")

@@ -1,0 +1,378 @@
+"""`rmbuild evaluate`: localize held-out walks against radio maps built three ways and compare.
+
+* **split** — by walk, never by reading: the given ``test_walks``; else the walks whose role is "test";
+  else walk i (in ``walks`` order) is a test walk when ``i % split_every == split_offset`` (the last walk
+  when that selects none). Every other walk is a map walk.
+* **reference positions** of nodes — ``truth_poses`` when present; else, per walk, the fixes interpolated
+  linearly in time, only within the walk's fix span (NaN outside; a walk with < 2 fixes has none).
+* **maps**, on one grid (common origin) and AP list: "built" from the optimised positions, "surveyed" from
+  the reference positions, "raw" from the raw PDR poses (each walk in its own frame: the floor).
+* **gauge** — "anchors": the built positions are taken as they are (already in the building frame);
+  "se2": one rigid transform fitted on ALL map-walk nodes (built -> reference) is applied to every built
+  position, never one per walk. The raw map always gets its own single SE(2) fit (its walks have no common
+  frame to be anchored in); the result's ``alignment`` says what was done.
+* **errors** — per test scan, ‖predicted − reference position at the scan time‖ (reference interpolated
+  in time; scans outside the reference span are not scored). Without any reference the error statistics
+  cannot be computed; ``unavailable`` says so, and ``consistency`` (prediction vs. the optimised position
+  of the scan's own node) is still reported.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.evaluate import EvaluateConfig
+from rmbuild.config.radiomap import MapConfig
+from rmbuild.errors import InputError
+from rmbuild.evaluate.trajectory import align_se2
+from rmbuild.localize.base import Query, make_localizer
+from rmbuild.radiomap.build import RadioMap, build_radio_map, grid_origin
+from rmbuild.types import Dataset, Fingerprints
+
+MAP_NAMES = ("built", "surveyed", "raw")
+STAT_KEYS = ("mean", "median", "p75", "p90", "rmse", "max", "p_lt_5m", "p_lt_10m", "n")
+
+
+def error_stats(err: np.ndarray) -> dict:
+    """evo-style statistics of position errors (m): mean, median, p75, p90, rmse, max, P(<5 m), P(<10 m), n.
+
+    Non-finite errors are ignored (they are counted separately by the caller); n = finite errors.
+    """
+    e = np.asarray(err, dtype=float)
+    e = e[np.isfinite(e)]
+    if e.size == 0:
+        return {k: (0 if k == "n" else None) for k in STAT_KEYS}
+    return {
+        "mean": float(e.mean()),
+        "median": float(np.median(e)),
+        "p75": float(np.percentile(e, 75)),
+        "p90": float(np.percentile(e, 90)),
+        "rmse": float(np.sqrt((e ** 2).mean())),
+        "max": float(e.max()),
+        "p_lt_5m": float((e < 5.0).mean()),
+        "p_lt_10m": float((e < 10.0).mean()),
+        "n": int(e.size),
+    }
+
+
+def split_walks(
+    dataset: Dataset, cfg: EvaluateConfig, test_walks: list[str] | None = None
+) -> tuple[list[str], list[str], str]:
+    """(map_walks, test_walks, rule) — see the module docstring. Raises InputError for bad choices."""
+    ids = [str(w) for w in dataset.walks["walk_id"]]
+    if len(ids) < 2:
+        raise InputError(f"evaluation needs at least 2 walks (map + test), got {len(ids)}")
+    if test_walks is not None:
+        test = [str(w) for w in test_walks]
+        unknown = sorted(set(test) - set(ids))
+        if unknown:
+            raise InputError(f"unknown test walk {unknown[0]!r}")
+        rule = "given"
+    elif "role" in dataset.walks and (dataset.walks["role"].astype(str) == "test").any():
+        test = [w for w, r in zip(ids, dataset.walks["role"].astype(str), strict=True) if r == "test"]
+        rule = "role"
+    else:
+        k, o = cfg.split_every, cfg.split_offset
+        test = [w for i, w in enumerate(ids) if i % k == o] or [ids[-1]]
+        rule = f"every {k}th walk from index {o}"
+    tset = set(test)
+    test = [w for w in ids if w in tset]
+    maps = [w for w in ids if w not in tset]
+    if not test:
+        raise InputError("no test walks")
+    if not maps:
+        raise InputError("every walk is a test walk: no walks left to build the map from")
+    return maps, test, rule
+
+
+def _interp_track(t_track: np.ndarray, xy: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of a track at times t; NaN outside [t_track.min, t_track.max]."""
+    out = np.full((len(t), 2), np.nan)
+    ok_tr = np.isfinite(t_track) & np.isfinite(xy).all(axis=1)
+    t_track, xy = t_track[ok_tr], xy[ok_tr]
+    if len(t_track) == 0:
+        return out
+    o = np.argsort(t_track, kind="stable")
+    t_track, xy = t_track[o], xy[o]
+    inside = (t >= t_track[0]) & (t <= t_track[-1])
+    if len(t_track) == 1:
+        out[inside] = xy[0]
+        return out
+    out[inside, 0] = np.interp(t[inside], t_track, xy[:, 0])
+    out[inside, 1] = np.interp(t[inside], t_track, xy[:, 1])
+    return out
+
+
+def _reference_tracks(dataset: Dataset) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], str | None]:
+    """walk_id -> (t_s, xy) of its reference track, and the source ("truth_poses", "fixes" or None)."""
+    tp = dataset.truth_poses
+    if tp is not None and len(tp) == dataset.n_nodes and len(tp) > 0:
+        src, df = "truth_poses", tp
+    elif dataset.fixes is not None and len(dataset.fixes) > 0:
+        src, df = "fixes", dataset.fixes
+    else:
+        return {}, None
+    tracks = {}
+    for wid, g in df.groupby(df["walk_id"].astype(str), sort=False):
+        if src == "fixes" and len(g) < 2:
+            continue
+        tracks[str(wid)] = (g["t_s"].to_numpy(dtype=float), g[["x_m", "y_m"]].to_numpy(dtype=float))
+    return tracks, src
+
+
+def reference_positions(dataset: Dataset) -> tuple[np.ndarray, str | None]:
+    """float64 (n_nodes, 2) reference position of every node (NaN = unknown) and its source."""
+    ref = np.full((dataset.n_nodes, 2), np.nan)
+    tp = dataset.truth_poses
+    if tp is not None and len(tp) == dataset.n_nodes and len(tp) > 0:
+        return tp[["x_m", "y_m"]].to_numpy(dtype=float), "truth_poses"
+    tracks, src = _reference_tracks(dataset)
+    if src is None:
+        return ref, None
+    t = dataset.poses["t_s"].to_numpy(dtype=float)
+    for wid, sl in dataset.walk_slices().items():
+        if wid in tracks:
+            ref[sl] = _interp_track(*tracks[wid], t[sl])
+    return ref, src
+
+
+def _apply(r: np.ndarray, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    return xy @ r.T + t
+
+
+def _fit_se2(src: np.ndarray, dst: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    ok = rows[np.isfinite(src[rows]).all(axis=1) & np.isfinite(dst[rows]).all(axis=1)]
+    if len(ok) < 2:
+        raise InputError("SE(2) gauge needs at least 2 map nodes with reference positions")
+    r, t = align_se2(src[ok], dst[ok])
+    res = np.hypot(*(_apply(r, t, src[ok]) - dst[ok]).T)
+    info = {"rotation_deg": float(np.degrees(np.arctan2(r[1, 0], r[0, 0]))),
+            "translation_m": [float(t[0]), float(t[1])], "n_points": int(len(ok)),
+            "residual_rms_m": float(np.sqrt((res ** 2).mean()))}
+    return r, t, info
+
+
+def _nan_to_none(x):
+    if isinstance(x, dict):
+        return {k: _nan_to_none(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_nan_to_none(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+@dataclass
+class EvalResult:
+    """Everything `evaluate` computed. ``stats[map][localizer]`` has :data:`STAT_KEYS`; ``errors[map][loc]``
+    float64 (n_queries,) per-scan errors in m (NaN = not scored); ``predictions[map][loc]`` (n_queries, 2).
+    ``query``: the test scans; ``query_ref_xy`` (n_queries, 2) their reference positions (NaN unknown).
+    ``unavailable``: what could not be computed -> why. ``maps``: the radio maps (name -> RadioMap).
+    """
+
+    gauge: str
+    test_walks: list[str]
+    map_walks: list[str]
+    split_rule: str
+    reference_source: str | None
+    stats: dict[str, dict[str, dict]]
+    errors: dict[str, dict[str, np.ndarray]]
+    predictions: dict[str, dict[str, np.ndarray]]
+    query: Query
+    query_ref_xy: np.ndarray
+    alignment: dict
+    unavailable: dict[str, str]
+    consistency: dict[str, dict[str, dict]]
+    maps: dict[str, RadioMap] = field(repr=False)
+    localizers: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        """``{"gauge", "test_walks", "maps": {map: {localizer: stats}}}`` plus extra keys (JSON-safe)."""
+        failed = {m: {loc: int(np.isnan(p[:, 0]).sum()) for loc, p in d.items()}
+                  for m, d in self.predictions.items()}
+        out = {
+            "gauge": self.gauge,
+            "test_walks": list(self.test_walks),
+            "maps": {m: {loc: dict(s) for loc, s in d.items()} for m, d in self.stats.items()},
+            "map_walks": list(self.map_walks),
+            "split": self.split_rule,
+            "reference": self.reference_source,
+            "n_queries": int(len(self.query)),
+            "n_scored": int(np.isfinite(self.query_ref_xy).all(axis=1).sum()),
+            "n_unlocalized": failed,
+            "alignment": self.alignment,
+            "consistency": self.consistency,
+            "map_info": {m: {"n_cells": rm.n_cells, "n_nodes": len(rm.nodes), "n_aps": len(rm.bssids),
+                             "cell_size_m": rm.cell_size_m} for m, rm in self.maps.items()},
+            "unavailable": dict(self.unavailable),
+        }
+        return _nan_to_none(out)
+
+    def table(self) -> str:
+        """A short fixed-width text table: one row per map and localizer."""
+        head = f"{'map':<9}{'localizer':<10}{'mean':>7}{'median':>8}{'p90':>7}{'rmse':>7}{'max':>7}" \
+               f"{'<5m':>6}{'<10m':>6}{'n':>6}"
+        lines = [head, "-" * len(head)]
+
+        def f(v, w, p=2):
+            return f"{'-':>{w}}" if v is None else f"{v:>{w}.{p}f}"
+
+        for m in MAP_NAMES:
+            for loc, s in self.stats.get(m, {}).items():
+                lines.append(f"{m:<9}{loc:<10}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
+                             f"{f(s['rmse'], 7)}{f(s['max'], 7)}{f(s['p_lt_5m'], 6)}{f(s['p_lt_10m'], 6)}"
+                             f"{s['n']:>6d}")
+        lines.append(f"gauge: {self.gauge}; test walks: {len(self.test_walks)} ({self.split_rule}); "
+                     f"errors in m")
+        for what, why in self.unavailable.items():
+            lines.append(f"not computed: {what}: {why}")
+        return "\n".join(lines)
+
+    def cdf_figure(self):
+        """Figure: empirical CDF of the per-scan errors, every map (colour) and localizer (line style)."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(7, 4.5), layout="constrained")
+        ax = fig.subplots()
+        colours = {"built": "C0", "surveyed": "C2", "raw": "C3"}
+        styles = ["-", "--", ":", "-."]
+        locs = list(self.localizers)
+        for m, d in self.errors.items():
+            for loc, e in d.items():
+                e = np.sort(e[np.isfinite(e)])
+                if e.size == 0:
+                    continue
+                y = np.arange(1, e.size + 1) / e.size
+                ax.step(e, y, where="post", color=colours.get(m, None),
+                        ls=styles[locs.index(loc) % len(styles)] if loc in locs else "-",
+                        label=f"{m} / {loc} (median {np.median(e):.1f} m)")
+        for x in (5, 10):
+            ax.axvline(x, color="0.8", lw=0.8, zorder=0)
+        ax.set_xlabel("position error [m]")
+        ax.set_ylabel("fraction of test scans")
+        ax.set_ylim(0, 1)
+        ax.set_xlim(left=0)
+        ax.grid(alpha=0.3)
+        if ax.lines:
+            ax.legend(fontsize=8, loc="lower right")
+        ax.set_title(f"localization error CDF (gauge: {self.gauge}, {len(self.test_walks)} test walks)")
+        return fig
+
+
+def evaluate(
+    dataset: Dataset,
+    fingerprints: Fingerprints,
+    built_xy: np.ndarray,
+    cfg: EvaluateConfig | None = None,
+    test_walks: list[str] | None = None,
+    gauge: str = "se2",
+    *,
+    map_cfg: MapConfig | None = None,
+) -> EvalResult:
+    """Build the built / surveyed / raw maps from the map walks and localize every test scan against each.
+
+    ``built_xy``: float (n_nodes, 2) optimised node positions (row = node id). ``fingerprints``: the
+    per-node fingerprints (their ``bssids`` fix the AP order of all maps). ``gauge``: "anchors" or "se2".
+    ``map_cfg``: how the maps are rasterised (default MapConfig()). Raises InputError for bad input.
+    """
+    cfg = cfg or EvaluateConfig()
+    map_cfg = map_cfg or MapConfig()
+    for c in (cfg, map_cfg):
+        try:
+            c.validate()
+        except ValueError as e:
+            raise InputError(f"config: {e}") from None
+    if gauge not in ("anchors", "se2"):
+        raise InputError(f"gauge must be 'anchors' or 'se2', got {gauge!r}")
+    built_xy = np.asarray(built_xy, dtype=float)
+    if built_xy.shape != (dataset.n_nodes, 2):
+        raise InputError(f"built positions have shape {built_xy.shape}, expected ({dataset.n_nodes}, 2)")
+    if dataset.wifi is None or len(dataset.wifi) == 0:
+        raise InputError("no Wi-Fi readings: nothing to build a map from or to localize")
+    map_walks, test, rule = split_walks(dataset, cfg, test_walks)
+    from rmbuild.localize.base import localizer_class
+
+    for name in cfg.localizers:
+        localizer_class(name)  # unknown names fail before any work
+
+    unavailable: dict[str, str] = {}
+    ref_xy, src = reference_positions(dataset)
+    walk_of_node = dataset.poses["walk_id"].astype(str).to_numpy()
+    map_nodes = np.flatnonzero(np.isin(walk_of_node, map_walks))
+    raw_xy = dataset.poses[["x_m", "y_m"]].to_numpy(dtype=float)
+
+    alignment: dict = {"built": gauge, "raw": "none"}
+    built_al = built_xy
+    if src is None:
+        unavailable["errors"] = "no ground truth (neither truth poses nor fixes): no reference positions"
+        unavailable["maps.surveyed"] = "no ground truth to build a surveyed map from"
+        if gauge == "se2":
+            unavailable["gauge"] = "se2 alignment needs reference positions; built map left in its own frame"
+            alignment["built"] = "none"
+    else:
+        if gauge == "se2":
+            r, t, info = _fit_se2(built_xy, ref_xy, map_nodes)
+            built_al = _apply(r, t, built_xy)
+            alignment["built_se2"] = info
+        r, t, info = _fit_se2(raw_xy, ref_xy, map_nodes)
+        raw_xy = _apply(r, t, raw_xy)
+        alignment["raw"] = "se2"
+        alignment["raw_se2"] = info
+
+    positions = {"built": built_al, "raw": raw_xy}
+    if src is not None:
+        positions["surveyed"] = ref_xy
+    stack = np.vstack([p[map_nodes] for p in positions.values()])
+    origin = grid_origin(stack, map_cfg.cell_size_m)
+    wifi = dataset.wifi[dataset.wifi["walk_id"].astype(str).isin(set(map_walks))]
+    wifi = wifi[pd.to_numeric(wifi["node"], errors="coerce").notna()]
+    if len(wifi) == 0:
+        raise InputError("the map walks have no Wi-Fi readings attached to nodes")
+    node_walk = walk_of_node
+    bssids = np.asarray(fingerprints.bssids, dtype=object)
+    maps: dict[str, RadioMap] = {}
+    for name in MAP_NAMES:
+        if name not in positions:
+            continue
+        frame = "building" if (name == "surveyed" or alignment.get(name) in ("anchors", "se2")) else ""
+        maps[name] = build_radio_map(wifi, positions[name], node_walk, map_cfg, origin, bssids=bssids,
+                                     frame=frame)
+
+    query = Query.from_dataset(dataset, test, bssids, unit=cfg.query)
+    if len(query) == 0:
+        raise InputError("the test walks have no Wi-Fi scans")
+    tracks, _ = _reference_tracks(dataset)
+    q_ref = np.full((len(query), 2), np.nan)
+    for wid, rows in query.walks():
+        if wid in tracks:
+            q_ref[rows] = _interp_track(*tracks[wid], query.t_s[rows])
+    q_node = query.node
+    q_built = np.where((q_node >= 0)[:, None], built_al[np.maximum(q_node, 0)], np.nan)
+
+    stats: dict[str, dict[str, dict]] = {}
+    errors: dict[str, dict[str, np.ndarray]] = {}
+    preds: dict[str, dict[str, np.ndarray]] = {}
+    consistency: dict[str, dict[str, dict]] = {}
+    for mname, rm in maps.items():
+        stats[mname], errors[mname], preds[mname] = {}, {}, {}
+        for lname in cfg.localizers:
+            loc = make_localizer(lname, cfg).fit(rm)
+            p = np.asarray(loc.predict(query), dtype=float)
+            preds[mname][lname] = p
+            if src is not None:
+                e = np.hypot(*(p - q_ref).T)
+                errors[mname][lname] = e
+                stats[mname][lname] = error_stats(e)
+            if mname == "built":
+                consistency.setdefault("built", {})[lname] = error_stats(np.hypot(*(p - q_built).T))
+    if src is None:
+        stats, errors = {}, {}
+    return EvalResult(
+        gauge=gauge, test_walks=test, map_walks=map_walks, split_rule=rule, reference_source=src,
+        stats=stats, errors=errors, predictions=preds, query=query, query_ref_xy=q_ref, alignment=alignment,
+        unavailable=unavailable, consistency=consistency, maps=maps, localizers=list(cfg.localizers),
+    )

@@ -1,0 +1,221 @@
+"""The localizer interface: reference sets (what a map offers), queries (what is localized), the protocol.
+
+Every localizer — single-scan fingerprint matchers (kNN, naive Bayes, SSD) and sequence localizers that
+also use each test walk's step events (SLAC, PFL) — has the same shape::
+
+    loc = make_localizer("knn", evaluate_cfg)   # registry name -> configured instance
+    loc.fit(radio_map)                          # a RadioMap or a ReferenceSet
+    xy = loc.predict(query)                     # (n_scans, 2) metres in the map's frame, NaN = no estimate
+
+A :class:`Query` carries, per scan, the fingerprint in the map's AP order, the scan time and walk id, and
+(optionally) per-walk step tables in the walk's own frame, so a sequence localizer can walk each test
+walk's scans in time order with :meth:`Query.walks` and read its steps from :attr:`Query.steps`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar, Literal, Protocol, runtime_checkable
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.errors import InputError
+
+if TYPE_CHECKING:
+    from rmbuild.radiomap.build import RadioMap
+    from rmbuild.types import Dataset
+
+#: Columns of a per-walk step table (walk's own PDR frame): step time, length, heading, step frequency.
+STEP_COLUMNS = ("t_s", "step_length_m", "heading_rad", "step_freq_hz")
+
+
+@dataclass
+class ReferenceSet:
+    """Reference points (RPs) a localizer matches against: grid cells of a radio map or raw map nodes.
+
+    ``xy``: float64 (n_rp, 2) metres, map frame. ``rss_dbm``: float32 (n_rp, n_ap) mean RSSI, NaN = not
+    detected. ``std_db``: float32 (n_rp, n_ap) unbiased per-AP std (NaN where fewer than 2 readings or not
+    detected) or None. ``count``: int32 (n_rp, n_ap) readings per AP or None. ``interpolated``: bool (n_rp,)
+    True for filled (never visited) cells. ``kind``: "cells" or "nodes".
+    """
+
+    xy: np.ndarray
+    rss_dbm: np.ndarray
+    bssids: np.ndarray
+    std_db: np.ndarray | None = None
+    count: np.ndarray | None = None
+    interpolated: np.ndarray | None = None
+    kind: str = "cells"
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def __post_init__(self) -> None:
+        n = len(self.xy)
+        if self.rss_dbm.shape != (n, len(self.bssids)):
+            raise ValueError(f"rss_dbm shape {self.rss_dbm.shape} != ({n}, {len(self.bssids)})")
+
+
+@dataclass
+class Query:
+    """Scans to localize, in time order within each walk.
+
+    ``rss_dbm``: float32 (n, n_ap) mean RSSI per AP in the column order ``bssids``, NaN = not detected.
+    ``t_s``: float64 (n,) scan times (s, the walk's clock). ``walk_id``: object (n,). ``node``: int64 (n,)
+    the pose node the scan is attached to (-1 unknown). ``steps``: walk_id -> DataFrame with
+    :data:`STEP_COLUMNS` (the walk's PDR step events in its own frame), or None when not available.
+    """
+
+    rss_dbm: np.ndarray
+    bssids: np.ndarray
+    t_s: np.ndarray
+    walk_id: np.ndarray
+    node: np.ndarray
+    steps: dict[str, pd.DataFrame] | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    def aligned(self, bssids: np.ndarray) -> Query:
+        """The same scans with columns in the order ``bssids`` (APs unknown to it dropped, new ones NaN)."""
+        bssids = np.asarray(bssids, dtype=object)
+        if len(bssids) == len(self.bssids) and np.array_equal(bssids, self.bssids):
+            return self
+        col = pd.Index(self.bssids).get_indexer(bssids)
+        out = np.full((len(self), len(bssids)), np.nan, dtype=np.float32)
+        ok = col >= 0
+        out[:, ok] = self.rss_dbm[:, col[ok]]
+        return Query(out, bssids, self.t_s, self.walk_id, self.node, self.steps, dict(self.extra))
+
+    def subset(self, mask: np.ndarray) -> Query:
+        """Rows where ``mask`` (bool (n,) or int index) selects; steps of walks no longer present dropped."""
+        wid = self.walk_id[mask]
+        steps = None
+        if self.steps is not None:
+            keep = set(map(str, wid))
+            steps = {k: v for k, v in self.steps.items() if k in keep}
+        return Query(self.rss_dbm[mask], self.bssids, self.t_s[mask], wid, self.node[mask], steps,
+                     dict(self.extra))
+
+    def walks(self) -> list[tuple[str, np.ndarray]]:
+        """(walk_id, row indices in time order) per walk, in order of first appearance."""
+        out = []
+        ids, first = np.unique(self.walk_id.astype(str), return_index=True)
+        for wid in ids[np.argsort(first)]:
+            rows = np.flatnonzero(self.walk_id.astype(str) == wid)
+            out.append((str(wid), rows[np.argsort(self.t_s[rows], kind="stable")]))
+        return out
+
+    @staticmethod
+    def from_dataset(
+        dataset: Dataset,
+        walk_ids: list[str],
+        bssids: np.ndarray | None = None,
+        unit: Literal["scan", "node"] = "scan",
+    ) -> Query:
+        """Queries from the Wi-Fi readings of ``walk_ids`` (rows ordered by walk, then time).
+
+        ``unit="scan"``: readings sharing (walk, t_s) form one scan (mean per AP if an AP repeats);
+        ``unit="node"``: readings attached to one node form one query (its fingerprint; t_s = mean time).
+        Readings without a node are kept for scans (node -1). Steps come from :func:`steps_from_poses`.
+        """
+        wifi = dataset.wifi
+        wifi = wifi[wifi["walk_id"].astype(str).isin(set(map(str, walk_ids)))]
+        if bssids is None:
+            bssids = np.array(sorted(wifi["bssid"].astype(str).unique()), dtype=object)
+        bssids = np.asarray(bssids, dtype=object)
+        order = {w: i for i, w in enumerate(map(str, walk_ids))}
+        wk = wifi["walk_id"].astype(str).to_numpy()
+        node = wifi["node"].to_numpy() if "node" in wifi else np.full(len(wifi), -1)
+        node = np.where(pd.isna(node), -1, node).astype(np.int64)
+        t = wifi["t_s"].to_numpy(dtype=np.float64)
+        if unit == "scan":
+            key = pd.DataFrame({"w": [order[w] for w in wk], "t": t})
+        else:
+            key = pd.DataFrame({"w": [order[w] for w in wk], "n": node})
+        grp = key.groupby(list(key.columns), sort=True).ngroup().to_numpy()
+        n_q = int(grp.max()) + 1 if len(grp) else 0
+        col = pd.Index(bssids).get_indexer(wifi["bssid"].astype(str))
+        ok = col >= 0
+        m = len(bssids)
+        flat = grp[ok] * m + col[ok]
+        rss = wifi["rssi_dbm"].to_numpy(dtype=np.float64)[ok]
+        sums = np.bincount(flat, weights=rss, minlength=n_q * m).reshape(n_q, m)
+        cnt = np.bincount(flat, minlength=n_q * m).reshape(n_q, m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(cnt > 0, sums / np.maximum(cnt, 1), np.nan).astype(np.float32)
+        size = np.bincount(grp, minlength=n_q)
+        t_q = np.bincount(grp, weights=t, minlength=n_q) / np.maximum(size, 1)
+        first = np.full(n_q, -1, dtype=np.int64)
+        first[grp[::-1]] = np.arange(len(grp))[::-1]
+        w_q = wk[first].astype(object)
+        node_q = node[first]
+        steps = {w: steps_from_poses(dataset.poses[dataset.poses["walk_id"].astype(str) == w])
+                 for w in map(str, walk_ids)}
+        q = Query(mean, bssids, t_q, w_q, node_q, steps)
+        o = np.lexsort((q.t_s, [order[w] for w in q.walk_id]))
+        return q.subset(o)
+
+
+def steps_from_poses(poses: pd.DataFrame) -> pd.DataFrame:
+    """Step table (:data:`STEP_COLUMNS`) of one walk from its per-step poses (own frame, sorted by step).
+
+    Step k (k >= 1) goes from pose k-1 to pose k: its length is their distance, its heading the heading of
+    pose k, its time pose k's time.
+    """
+    x = poses["x_m"].to_numpy(dtype=float)
+    y = poses["y_m"].to_numpy(dtype=float)
+    f = poses["step_freq_hz"].to_numpy(dtype=float) if "step_freq_hz" in poses else np.full(len(x), np.nan)
+    return pd.DataFrame({
+        "t_s": poses["t_s"].to_numpy(dtype=float)[1:],
+        "step_length_m": np.hypot(np.diff(x), np.diff(y)),
+        "heading_rad": poses["heading_rad"].to_numpy(dtype=float)[1:],
+        "step_freq_hz": f[1:],
+    })
+
+
+@runtime_checkable
+class Localizer(Protocol):
+    """What every localizer offers. ``name`` is its registry name (also its key in reports)."""
+
+    name: ClassVar[str]
+
+    def fit(self, ref: RadioMap | ReferenceSet) -> Localizer: ...
+
+    def predict(self, query: Query) -> np.ndarray: ...
+
+
+def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> ReferenceSet:
+    """A :class:`ReferenceSet` from a RadioMap (its ``kind`` view: "cells" or "nodes") or as is."""
+    if isinstance(ref, ReferenceSet):
+        return ref
+    return ref.reference_set(kind)
+
+
+#: Registry: name -> "module:Class". Explicit and lazily imported; a localizer class provides
+#: ``from_config(cfg: EvaluateConfig)`` returning a configured, unfitted instance.
+LOCALIZERS: dict[str, str] = {
+    "knn": "rmbuild.localize.knn:KnnLocalizer",
+    "wknn": "rmbuild.localize.knn:WeightedKnnLocalizer",
+}
+
+
+def localizer_class(name: str) -> type:
+    """The class registered under ``name``; an unknown name is an :class:`InputError`."""
+    if name not in LOCALIZERS:
+        raise InputError(f"unknown localizer {name!r} (known: {', '.join(sorted(LOCALIZERS))})")
+    import importlib
+
+    mod, cls = LOCALIZERS[name].split(":")
+    return getattr(importlib.import_module(mod), cls)
+
+
+def make_localizer(name: str, cfg=None):
+    """A configured, unfitted localizer. ``cfg``: an EvaluateConfig (None = defaults)."""
+    if cfg is None:
+        from rmbuild.config.evaluate import EvaluateConfig
+
+        cfg = EvaluateConfig()
+    return localizer_class(name).from_config(cfg)

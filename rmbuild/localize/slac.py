@@ -1,0 +1,502 @@
+"""SLAC: simultaneous localization and calibration (seed 000; METHOD.md §8 restates its equations).
+
+Per test walk, scans in time order. For each new scan the last ``M`` scans (the window) are localized
+jointly for every particle ``p`` = device model ``[k_p, b_p]``:
+
+* **signal difference** (eq. 9-10): with the scan mapped into map units, ``u = k'φ + b'``, and the RP's
+  mean ψ̄ and std σ per AP, ``Γ_p(φ_m, ψ_q) = mean over shared APs of (u − ψ̄)² + σ²`` (APs not detected
+  on either side excluded; an RP sharing no AP is never a candidate). Under ``device_model = "device"``
+  the particle is the device's own model ``φ = kψ + b`` and ``k' = 1/k, b' = −b/k``; under
+  ``"calibration"`` it is eq. 5 literally (``k' = k, b' = b``). Γ for all RPs comes from six matrix products
+  per scan (expand the square), so it costs O(Q·L) per scan, not per particle.
+* **candidates**: the ``N`` RPs with the smallest Γ; ``λ = max Γ / Σ Γ`` over them (eq. 14).
+* **joint optimisation** (eq. 11-20): weights ``ω`` (window × N per particle) on the capped simplex
+  (Σω = 1, 0 ≤ ω ≤ λ) with the signal bound ``Σ_m Σ_q Γω ≤ γ`` and the shared step model ``[α, β]``,
+  minimising ``Σ_m B(‖x_m − x_{m−1}‖ − δ_m)`` (Berhu, eq. 17), ``x_m = Σ ω r``, ``δ_m = Σ_c (α f_c + β)``
+  over the steps between the two scans. ``γ = g Σ_m c_m`` with ``c_m`` the least signal cost reachable
+  under the cap (seed 000 writes ``g Σ min Γ``, which the cap makes unreachable for g near 1).
+  Solved for all particles at once by projected gradient (exact projection onto the capped simplex by
+  its breakpoints) with a feasibility retraction towards the least-signal-cost point for the signal bound;
+  ``[α, β]`` by projected gradient on their box. The Berhu loss and the norm get an ``ε`` smoothing at 0.
+* **particle filter** (eq. 21-25): ``θ_p ∝ exp(−(Σδ − Σd_p)² / 2σ_w²)`` (optionally times the Gaussian
+  likelihood of the newest scan given the particle's weighted RPs, ``particle_weight``), estimate
+  ``x̂ = Σ θ_p x_p``, ``k̂, b̂ = Σ θ_p [k_p, b_p]``, systematic resampling, roughening.
+* **convergence** (eq. 26-29): ``ξ = mean_p ‖x_p − x̂‖ ≤ η sqrt(Var δ)``, ``Var δ = C (α² Var f + β²)``;
+  then ``P = 1`` with ``[k̂, b̂, α, β]`` fixed for the rest of the walk.
+
+Fallbacks (named in :attr:`SlacLocalizer.diagnostics` and :meth:`SlacLocalizer.summary`):
+``"std:median"`` / ``"std:zero"`` (σ missing in the map), ``"steps:pdr"`` (no step frequencies),
+``"steps:none"`` (no step events, ``no_steps = "fingerprint_only"``), ``"window:short"`` (the walk has
+fewer scans than M: the window never fills), ``"scan:no_shared_ap"`` (a scan shares no AP with any RP:
+NaN, its steps carry over to the next scan).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.localize import SlacConfig
+from rmbuild.errors import InputError
+from rmbuild.localize.base import Query, ReferenceSet, as_reference
+
+log = logging.getLogger(__name__)
+
+
+def sub_config(cfg, name: str, cls: type):
+    """The localizer's own config from ``cfg``: an instance of ``cls`` as is, an EvaluateConfig's field
+    ``name`` when it has one, else ``cls()`` (until EvaluateConfig carries the field)."""
+    if cfg is None:
+        return cls()
+    if isinstance(cfg, cls):
+        return cfg
+    sub = getattr(cfg, name, None)  # transitional: EvaluateConfig may not have the field yet
+    return sub if isinstance(sub, cls) else cls()
+
+
+# --------------------------------------------------------------------------- device model helpers
+def to_map_units(k: np.ndarray | float, b: np.ndarray | float, device_model: str) -> tuple:
+    """(k', b') with map-unit signal u = k' φ + b' for a device model [k, b] of the given direction."""
+    k = np.asarray(k, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if device_model == "device":
+        return 1.0 / k, -b / k
+    return k, b
+
+
+def calibrate_rss(rss_dbm: np.ndarray, k: float, b: float, device_model: str = "device") -> np.ndarray:
+    """Scan RSSI (n, L) dBm mapped into the map's units by a known device model (NaN stays NaN)."""
+    kp, bp = to_map_units(k, b, device_model)
+    return (kp * np.asarray(rss_dbm, dtype=np.float64) + bp).astype(np.float32)
+
+
+def calibrate_query(query: Query, k: float, b: float, device_model: str = "device") -> Query:
+    """A copy of ``query`` with every reading mapped into the map's units (see :func:`calibrate_rss`)."""
+    return Query(calibrate_rss(query.rss_dbm, k, b, device_model), query.bssids, query.t_s, query.walk_id,
+                 query.node, query.steps, dict(query.extra))
+
+
+def fit_device_model(map_dbm: np.ndarray, device_dbm: np.ndarray) -> tuple[float, float, int]:
+    """Offline linear fit (seed 000 [21]) ``device = k · map + b`` from co-located readings.
+
+    ``map_dbm``, ``device_dbm``: same shape, NaN where either side has no reading. Returns (k, b, n pairs).
+    Raises InputError with fewer than 2 pairs or no spread in ``map_dbm``.
+    """
+    a = np.asarray(map_dbm, dtype=float).ravel()
+    d = np.asarray(device_dbm, dtype=float).ravel()
+    ok = np.isfinite(a) & np.isfinite(d)
+    if ok.sum() < 2 or np.ptp(a[ok]) == 0:
+        raise InputError(f"offline device fit needs >= 2 co-located readings with spread, got {int(ok.sum())}")
+    k, b = np.polyfit(a[ok], d[ok], 1)
+    return float(k), float(b), int(ok.sum())
+
+
+# --------------------------------------------------------------------------- numeric kernels
+def berhu(z: np.ndarray, t: float) -> np.ndarray:
+    """Berhu loss (eq. 17): |z| for |z| <= T, (z² + T²) / 2T beyond."""
+    a = np.abs(z)
+    return np.where(a <= t, a, (z * z + t * t) / (2.0 * t))
+
+
+def project_capped_simplex(y: np.ndarray, cap: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Euclidean projection of each row of ``y`` (..., N) onto {Σω = 1, 0 ≤ ω ≤ cap, ω = 0 where not valid}.
+
+    ``cap`` (...,) per row with cap · (valid entries) >= 1. Exact: the row sum s(τ) = Σ clip(y − τ, 0, cap)
+    is piecewise linear in τ with breakpoints y and y − cap; it is evaluated at all of them and
+    interpolated where it crosses 1.
+    """
+    shp = y.shape
+    n = shp[-1]
+    y2 = y.reshape(-1, n)
+    c = np.broadcast_to(cap, shp[:-1]).reshape(-1, 1)
+    v = valid.reshape(-1, n)
+    lo = np.where(v, y2, np.inf).min(axis=1, keepdims=True)
+    y2 = np.where(v, y2, lo - 4.0 * c - 1.0)  # invalid entries never rise above 0
+    bp = np.sort(np.concatenate([y2, y2 - c], axis=1), axis=1)  # (R, 2N)
+    s = np.clip(y2[:, None, :] - bp[:, :, None], 0.0, c[:, :, None])
+    s = np.where(v[:, None, :], s, 0.0).sum(axis=2)  # (R, 2N), non-increasing
+    j = (s >= 1.0).sum(axis=1)  # s[j-1] >= 1 > s[j]
+    j = np.clip(j, 1, 2 * n - 1)
+    r = np.arange(len(bp))
+    b0, b1, s0, s1 = bp[r, j - 1], bp[r, j], s[r, j - 1], s[r, j]
+    den = s0 - s1
+    tau = np.where(den > 1e-15, b0 + (s0 - 1.0) * (b1 - b0) / np.where(den > 1e-15, den, 1.0), b0)
+    w = np.where(v, np.clip(y2 - tau[:, None], 0.0, c), 0.0)
+    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rounding only
+    return w.reshape(shp)
+
+
+def greedy_capped(gam: np.ndarray, cap: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Least-cost point of the capped simplex: fill ``cap`` on the smallest ``gam`` first (rows sorted
+    ascending along the last axis, invalid entries last). Returns ω (..., N)."""
+    c = cap[..., None]
+    before = np.cumsum(np.where(valid, c, 0.0), axis=-1) - c
+    w = np.clip(1.0 - before, 0.0, c)
+    return np.where(valid, w, 0.0)
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class SlacWalkResult:
+    """What SLAC learnt on one walk. ``xi_m`` (n_scans,) dispersion ξ after each scan (NaN before the first
+    estimate, 0 after convergence); ``converged_scan``: index (within the walk's scans, time order) of the
+    scan at which ξ <= η sqrt(Var δ) first held, or None; ``k, b`` in the config's ``device_model``
+    direction; ``alpha`` m/Hz, ``beta`` m (NaN when not calibrated); ``fallbacks``: names of fallbacks."""
+
+    walk_id: str
+    n_scans: int
+    k: float
+    b: float
+    alpha: float
+    beta: float
+    converged_scan: int | None
+    converged_t_s: float | None
+    xi_m: np.ndarray
+    fallbacks: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        def num(v):
+            return None if v is None or not np.isfinite(v) else float(v)
+
+        return {"walk_id": self.walk_id, "n_scans": self.n_scans, "k": num(self.k), "b": num(self.b),
+                "alpha": num(self.alpha), "beta": num(self.beta), "converged_scan": self.converged_scan,
+                "converged_t_s": num(self.converged_t_s), "fallbacks": list(self.fallbacks),
+                "xi_final_m": num(self.xi_m[-1]) if len(self.xi_m) else None}
+
+
+@dataclass
+class _Steps:
+    """Per scan: steps since the previous scan — count C, Σ f (Hz), Σ PDR length (m); and the frequencies."""
+
+    count: np.ndarray
+    fsum: np.ndarray
+    length: np.ndarray
+    freqs: list[np.ndarray]
+
+
+def _steps_between(t_scan: np.ndarray, steps: pd.DataFrame) -> _Steps:
+    ts = steps["t_s"].to_numpy(dtype=float)
+    f = steps["step_freq_hz"].to_numpy(dtype=float)
+    ln = steps["step_length_m"].to_numpy(dtype=float)
+    o = np.argsort(ts, kind="stable")
+    ts, f, ln = ts[o], f[o], ln[o]
+    # scan i collects steps with t in (t_{i-1}, t_i]; the first scan has none before it
+    hi = np.searchsorted(ts, t_scan, side="right")
+    lo = np.r_[hi[0], hi[:-1]] if len(hi) else hi
+    cf = np.r_[0.0, np.cumsum(np.nan_to_num(f))]
+    cl = np.r_[0.0, np.cumsum(np.nan_to_num(ln))]
+    count = (hi - lo).astype(float)
+    return _Steps(count, cf[hi] - cf[lo], cl[hi] - cl[lo], [f[a:b] for a, b in zip(lo, hi, strict=True)])
+
+
+class SlacLocalizer:
+    """SLAC (seed 000). ``fit(radio_map)``, then ``predict(query)`` needs ``query.steps`` for each walk.
+
+    After ``predict``, :attr:`diagnostics` maps walk id -> :class:`SlacWalkResult`.
+    """
+
+    name: ClassVar[str] = "slac"
+
+    def __init__(self, cfg: SlacConfig | None = None) -> None:
+        self.cfg = cfg or SlacConfig()
+        try:
+            self.cfg.validate()
+        except ValueError as e:
+            raise InputError(f"config: {e}") from None
+        self.ref: ReferenceSet | None = None
+        self.diagnostics: dict[str, SlacWalkResult] = {}
+        self.map_fallbacks: list[str] = []
+
+    @classmethod
+    def from_config(cls, cfg) -> SlacLocalizer:
+        return cls(sub_config(cfg, "slac", SlacConfig))
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, ref) -> SlacLocalizer:
+        """Store the RPs (a RadioMap's cells, or a ReferenceSet) with their per-AP mean and std."""
+        ref = as_reference(ref, "cells")
+        if len(ref) == 0:
+            raise InputError("SLAC: the reference set is empty")
+        self.ref = ref
+        det = ~np.isnan(ref.rss_dbm)
+        self.map_fallbacks = []
+        std = None if ref.std_db is None else np.asarray(ref.std_db, dtype=np.float64)
+        has_std = std is not None and bool(np.isfinite(std[det]).any())
+        if not has_std and self.cfg.missing_std == "error":
+            raise InputError("SLAC: the map has no RSSI std (σ); set slac.missing_std to 'median' or 'zero'")
+        if std is None:
+            std = np.full(det.shape, np.nan)
+        miss = det & ~np.isfinite(std)
+        fill = 0.0
+        if miss.any():
+            if self.cfg.missing_std == "median" and has_std:
+                fill = float(np.median(std[det & np.isfinite(std)]))
+                self.map_fallbacks.append("std:median")
+            else:
+                self.map_fallbacks.append("std:zero")
+        std = np.where(miss, fill, np.nan_to_num(std))
+        psi = np.where(det, ref.rss_dbm.astype(np.float64), 0.0)
+        self._B = det.astype(np.float64)  # (Q, L)
+        self._Psi = psi
+        self._S2 = np.where(det, psi * psi + std * std, 0.0)
+        self._xy = np.asarray(ref.xy, dtype=np.float64)
+        self.std_fill_db = fill
+        return self
+
+    # ------------------------------------------------------------- signals
+    def _scan_terms(self, rss: np.ndarray) -> np.ndarray:
+        """(6, n, Q) sums over shared APs: Σφ², Σφ, |S|, Σφψ̄, Σψ̄, Σ(ψ̄² + σ²)."""
+        det = ~np.isnan(rss)
+        phi = np.where(det, rss.astype(np.float64), 0.0)
+        b = det.astype(np.float64)
+        q = np.stack([phi * phi, phi, b])  # (3, n, L)
+        t1 = q @ self._B.T  # (3, n, Q)
+        return np.concatenate([t1, (phi @ self._Psi.T)[None], (b @ self._Psi.T)[None],
+                               (b @ self._S2.T)[None]])
+
+    @staticmethod
+    def _gamma(terms: np.ndarray, kp: np.ndarray, bp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Γ (P, W, Q) for map-unit parameters kp, bp (P,) and scan terms (6, W, Q); inf where |S| = 0.
+        Also |S| (W, Q)."""
+        a1, a2, a3, a4, a5, a6 = terms
+        k = kp[:, None, None]
+        b = bp[:, None, None]
+        num = k * k * a1 + 2 * k * b * a2 + b * b * a3 - 2 * k * a4 - 2 * b * a5 + a6
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(a3 > 0, np.maximum(num, 0.0) / np.where(a3 > 0, a3, 1.0), np.inf)
+        return g, a3
+
+    # ------------------------------------------------------------- solver
+    def _solve(self, gam_c, valid, cap, r_c, f_sum, count, dist_pdr, alpha, beta, theta, fixed_ab):
+        """Joint optimisation (eq. 20) for all particles. Shapes: gam_c, valid, r_c[..., :] (P, W, N[, 2]),
+        cap (P, W); f_sum, count, dist_pdr (W,) steps before each window scan (index 0 unused).
+        Returns ω (P, W, N), α, β."""
+        cfg = self.cfg
+        t, eps = cfg.berhu_t_m, cfg.solver_eps_m
+        w0 = greedy_capped(gam_c, cap, valid)
+        gcost = np.where(valid, gam_c, 0.0)
+        cost0 = (gcost * w0).sum(axis=(1, 2))
+        gamma = cfg.g * cost0
+        n_w = gam_c.shape[1]
+        if n_w < 2:
+            return w0, alpha, beta
+        rc = r_c - (r_c * valid[..., None]).sum(axis=2, keepdims=True) / np.maximum(
+            valid.sum(axis=2, keepdims=True), 1)[..., None]
+        spread2 = (np.where(valid, (rc * rc).sum(axis=3), 0.0)).max(axis=2)  # (P, W)
+        eta = 0.5 * t / (4.0 * spread2 + 1.0)
+        fs, cn = f_sum[1:], count[1:]
+        use_model = cfg.step_source == "frequency" and not fixed_ab
+        lo_a, hi_a = cfg.alpha_range
+        lo_b, hi_b = cfg.beta_range
+        eta_a = 0.25 * t / (float((fs * fs).sum()) + 1e-9)
+        eta_b = 0.25 * t / (float((cn * cn).sum()) + 1e-9)
+        w = w0
+        for it in range(cfg.solver_iters):
+            x = (w[..., None] * rc).sum(axis=2)  # centred coordinates of each window scan
+            x = x + (r_c - rc)[:, :, 0, :]  # add back the row centre
+            dx = x[:, 1:] - x[:, :-1]
+            d = np.sqrt((dx * dx).sum(axis=2) + eps * eps)
+            delta = (alpha * fs + beta * cn) if cfg.step_source == "frequency" else dist_pdr[1:]
+            z = d - delta
+            az = np.abs(z)
+            gz = np.where(az <= t, z / np.sqrt(z * z + eps * eps), z / t)  # (P, W-1)
+            gseg = gz[..., None] * dx / d[..., None]
+            gx = np.zeros_like(x)
+            gx[:, 1:] += gseg
+            gx[:, :-1] -= gseg
+            gw = (gx[:, :, None, :] * rc).sum(axis=3)
+            decay = 1.0 / np.sqrt(1.0 + it / 10.0)
+            w = project_capped_simplex(w - (eta * decay)[..., None] * gw, cap, valid)
+            # signal bound: retract towards the least-cost point when violated
+            cost = (gcost * w).sum(axis=(1, 2))
+            over = cost > gamma
+            if over.any():
+                s = np.where(over, (gamma - cost0) / np.maximum(cost - cost0, 1e-12), 1.0)
+                w = w0 + s[:, None, None] * (w - w0)
+            if use_model:
+                ga = -(theta[:, None] * gz * fs).sum()
+                gb = -(theta[:, None] * gz * cn).sum()
+                alpha = float(np.clip(alpha - eta_a * decay * ga, lo_a, hi_a))
+                beta = float(np.clip(beta - eta_b * decay * gb, lo_b, hi_b))
+        return w, alpha, beta
+
+    # ------------------------------------------------------------- predict
+    def predict(self, query: Query) -> np.ndarray:
+        """(n, 2) metres in the map's frame, one row per scan (causal: each from the scans up to it)."""
+        if self.ref is None:
+            raise RuntimeError("fit() first")
+        q = query.aligned(self.ref.bssids)
+        out = np.full((len(q), 2), np.nan)
+        self.diagnostics = {}
+        for wid, rows in q.walks():
+            steps = None if q.steps is None else q.steps.get(wid)
+            xy, res = self.localize_walk(q.rss_dbm[rows], q.t_s[rows], steps, wid)
+            out[rows] = xy
+            self.diagnostics[wid] = res
+        return out
+
+    def summary(self) -> dict:
+        """Medians over the last predict's walks of k, b, alpha, beta; walks converged; fallbacks used."""
+        res = list(self.diagnostics.values())
+
+        def med(key):
+            v = np.array([getattr(r, key) for r in res], dtype=float)
+            v = v[np.isfinite(v)]
+            return float(np.median(v)) if v.size else None
+
+        fb = sorted({f for r in res for f in r.fallbacks} | set(self.map_fallbacks))
+        return {"k": med("k"), "b": med("b"), "alpha": med("alpha"), "beta": med("beta"),
+                "device_model": self.cfg.device_model, "n_walks": len(res),
+                "n_converged": sum(r.converged_scan is not None for r in res), "fallbacks": fb}
+
+    def localize_walk(
+        self, rss_dbm: np.ndarray, t_s: np.ndarray, steps: pd.DataFrame | None, walk_id: str = ""
+    ) -> tuple[np.ndarray, SlacWalkResult]:
+        """Localize one walk's scans (time order). ``rss_dbm`` (n, L) in the map's AP order, NaN = missing;
+        ``t_s`` (n,) s; ``steps``: the walk's step table (t_s, step_length_m, step_freq_hz). Returns
+        ((n, 2) positions, :class:`SlacWalkResult`)."""
+        cfg = self.cfg
+        n = len(t_s)
+        fallbacks: list[str] = []
+        rng = np.random.default_rng(cfg.seed)
+        out = np.full((n, 2), np.nan)
+        xi_hist = np.full(n, np.nan)
+        no_steps = steps is None or len(steps) == 0
+        if no_steps:
+            if cfg.no_steps == "error":
+                raise InputError(f"SLAC: walk {walk_id!r} has no step events (set slac.no_steps = "
+                                 "'fingerprint_only' to localize it from Wi-Fi alone)")
+            fallbacks.append("steps:none")
+            steps = pd.DataFrame({"t_s": [], "step_length_m": [], "step_freq_hz": []})
+        step_source = cfg.step_source
+        if not no_steps and step_source == "frequency" and not np.isfinite(
+                steps["step_freq_hz"].to_numpy(dtype=float)).any():
+            step_source = "pdr"
+            fallbacks.append("steps:pdr")
+        if n < cfg.window_scans:
+            fallbacks.append("window:short")
+        st = _steps_between(np.asarray(t_s, dtype=float), steps)
+        if step_source == "frequency" and not no_steps:
+            f_all = steps["step_freq_hz"].to_numpy(dtype=float)
+            fmed = float(np.nanmedian(f_all))
+            # steps with a missing frequency count at the walk's median frequency
+            nan_cnt = np.array([np.isnan(f).sum() for f in st.freqs], dtype=float)
+            st.fsum = st.fsum + nan_cnt * fmed
+        terms = self._scan_terms(np.asarray(rss_dbm))
+        has_rp = (terms[2] > 0).any(axis=1)  # scan shares an AP with at least one RP
+        # coverage: an RP must share >= min_shared_fraction of the scan's APs (or the best any RP shares)
+        n_scan_ap = (~np.isnan(np.asarray(rss_dbm))).sum(axis=1)
+        need = np.minimum(np.ceil(cfg.min_shared_fraction * n_scan_ap - 1e-9), terms[2].max(axis=1))
+        coverage_ok = terms[2] >= np.maximum(need, 1.0)[:, None]
+        if not has_rp.all():
+            fallbacks.append("scan:no_shared_ap")
+
+        # particles, in the config's direction
+        p_n = cfg.n_particles
+        kp = rng.uniform(*cfg.k_range, p_n)
+        bp = rng.uniform(*cfg.b_range_db, p_n)
+        k_span = max(cfg.k_range[1] - cfg.k_range[0], 0.0)
+        b_span = max(cfg.b_range_db[1] - cfg.b_range_db[0], 0.0)
+        alpha = float(np.mean(cfg.alpha_range))
+        beta = float(np.mean(cfg.beta_range))
+        fixed = no_steps  # without steps nothing can be calibrated
+        converged: int | None = None
+        k_hat, b_hat = float(np.mean(kp)), float(np.mean(bp))
+        min_conv = cfg.min_scans_to_converge or cfg.window_scans
+        window: list[int] = []  # indices of valid scans in the window
+        # steps accumulated since the last valid scan (so a skipped scan's steps carry over)
+        acc_c = np.zeros(n)
+        acc_f = np.zeros(n)
+        acc_l = np.zeros(n)
+        carry = np.zeros(3)
+        seen = 0
+        for i in range(n):
+            carry += (st.count[i], st.fsum[i], st.length[i])
+            if not has_rp[i]:
+                continue
+            acc_c[i], acc_f[i], acc_l[i] = carry
+            carry[:] = 0.0
+            seen += 1
+            window.append(i)
+            if len(window) > cfg.window_scans:
+                window.pop(0)
+            win = np.array(window)
+            kk, bb = to_map_units(kp, bp, cfg.device_model)
+            gam, shared = self._gamma(terms[:, win], np.atleast_1d(kk), np.atleast_1d(bb))
+            gam = np.where(coverage_ok[win][None], gam, np.inf)
+            p_cur = gam.shape[0]
+            n_c = min(cfg.n_candidates, gam.shape[2])
+            part = np.argpartition(gam, n_c - 1, axis=2)[..., :n_c] if n_c < gam.shape[2] else \
+                np.broadcast_to(np.arange(gam.shape[2]), gam.shape[:2] + (gam.shape[2],)).copy()
+            gc = np.take_along_axis(gam, part, axis=2)
+            o = np.argsort(gc, axis=2)
+            cand = np.take_along_axis(part, o, axis=2)
+            gc = np.take_along_axis(gc, o, axis=2)
+            valid = np.isfinite(gc)
+            nv = valid.sum(axis=2)
+            gz = np.where(valid, gc, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lam = gz.max(axis=2) / gz.sum(axis=2)
+            lam = np.where(np.isfinite(lam), lam, 1.0)
+            lam = np.maximum(lam, 1.0 / np.maximum(nv, 1))  # feasibility: cap · |valid| >= 1
+            r_c = self._xy[cand]
+            theta_prev = np.full(p_cur, 1.0 / p_cur)
+            w, a_new, b_new = self._solve(gc, valid, lam, r_c, acc_f[win], acc_c[win], acc_l[win],
+                                          alpha, beta, theta_prev, fixed or converged is not None or no_steps)
+            if not (fixed or converged is not None or step_source != "frequency"):
+                alpha, beta = a_new, b_new
+            x = (w[..., None] * r_c).sum(axis=2)  # (P, W, 2)
+            # particle weights (eq. 21-23)
+            if len(win) >= 2 and not no_steps:
+                d_est = np.hypot(*np.moveaxis(np.diff(x, axis=1), 2, 0)).sum(axis=1)
+                delta = acc_l[win][1:].sum() if step_source == "pdr" else \
+                    float((alpha * acc_f[win][1:] + beta * acc_c[win][1:]).sum())
+                logw = -((delta - d_est) ** 2) / (2.0 * cfg.sigma_w_m ** 2)
+            else:
+                logw = np.zeros(p_cur)
+            if cfg.particle_weight == "distance_signal" and p_cur > 1:
+                # Gaussian likelihood of the newest scan given the particle's weighted RPs (map units,
+                # with the Jacobian k' of u = k'φ + b' per shared AP)
+                s_new = np.take_along_axis(np.broadcast_to(shared[-1], (p_cur,) + shared[-1].shape),
+                                           cand[:, -1], axis=1)
+                ll = -0.5 * s_new * gz[:, -1] / cfg.signal_sigma_db ** 2 + s_new * np.log(np.abs(kk))[:, None]
+                logw = logw + (w[:, -1] * ll).sum(axis=1)
+            theta = np.exp(logw - logw.max())
+            theta /= theta.sum()
+            est = (theta[:, None] * x[:, -1]).sum(axis=0)
+            out[i] = est
+            if converged is None:
+                k_hat, b_hat = float((theta * kp).sum()), float((theta * bp).sum())
+                # resampling (systematic) and roughening
+                idx = np.minimum(np.searchsorted(np.cumsum(theta), (rng.random() + np.arange(p_cur)) / p_cur),
+                                 p_cur - 1)
+                xi = float(np.hypot(*(x[idx, -1] - est).T).mean())
+                xi_hist[i] = xi
+                kp, bp = kp[idx], bp[idx]
+                if p_cur > 1 and cfg.roughen > 0:
+                    sk = cfg.roughen * max(np.ptp(kp), 0.02 * k_span) / np.sqrt(p_cur)
+                    sb = cfg.roughen * max(np.ptp(bp), 0.02 * b_span) / np.sqrt(p_cur)
+                    kp = np.clip(kp + rng.normal(0, sk, p_cur), *cfg.k_range)
+                    bp = np.clip(bp + rng.normal(0, sb, p_cur), *cfg.b_range_db)
+                # convergence (eq. 26-29)
+                if cfg.converge and not no_steps and seen >= min_conv and p_cur > 1:
+                    fw = np.concatenate([st.freqs[j] for j in win]) if len(win) else np.zeros(0)
+                    fw = fw[np.isfinite(fw)]
+                    var_f = float(fw.var()) if fw.size > 1 else 0.0
+                    var_s = alpha ** 2 * var_f + beta ** 2
+                    var_d = acc_c[win[-1]] * var_s
+                    if xi <= cfg.eta * np.sqrt(var_d):
+                        converged = i
+                        kp, bp = np.array([k_hat]), np.array([b_hat])
+            else:
+                xi_hist[i] = 0.0
+        if no_steps or step_source != "frequency":
+            alpha, beta = float("nan"), float("nan")
+        conv_scan = None if converged is None else int(converged)
+        res = SlacWalkResult(walk_id, n, k_hat, b_hat, alpha, beta, conv_scan,
+                             None if conv_scan is None else float(t_s[conv_scan]), xi_hist, fallbacks)
+        return out, res

@@ -1,0 +1,69 @@
+"""`rmbuild evaluate`: localize held-out walks with the built, surveyed and raw maps; errors vs truth."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config import EvaluateConfig, MapConfig, to_toml
+from rmbuild.io.workspace import Workspace
+from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.mapping import built_positions
+
+
+def run(
+    workspace: str | Path,
+    cfg: EvaluateConfig,
+    map_cfg: MapConfig,
+    test_walks: list[str] | None = None,
+    progress: Progress | None = None,
+    viewer=None,
+) -> tuple[dict, str]:
+    """Evaluate; returns (the evaluate report, a short text table)."""
+    from rmbuild.evaluate.localization import evaluate
+
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    ws = Workspace.open(workspace)
+    ds = ws.read_dataset()
+    fp = ws.read_fingerprints()
+    xy, info = built_positions(ws, ds, map_cfg)
+    if test_walks:
+        known = set(ds.walks["walk_id"].astype(str))
+        unknown = [w for w in test_walks if w not in known]
+        if unknown:
+            from rmbuild.errors import InputError
+
+            raise InputError(f"--test-walks: unknown walk {unknown[0]!r}")
+    progress.phase("building maps and localizing")
+    res = evaluate(ds, fp, xy, cfg, test_walks=test_walks, gauge=info["gauge"], map_cfg=map_cfg)
+    report = {"stage": "evaluate", **res.to_json(), "built_map_frame": info}
+    report["time_s"] = {"total": round(time.perf_counter() - t0, 3)}
+    q = res.query
+    rows = []
+    for mname, d in res.predictions.items():
+        for lname, p in d.items():
+            err = res.errors.get(mname, {}).get(lname)
+            rows.append(pd.DataFrame({
+                "map": mname, "localizer": lname, "walk_id": q.walk_id.astype(str), "t_s": q.t_s,
+                "x_est_m": p[:, 0], "y_est_m": p[:, 1],
+                "x_true_m": res.query_ref_xy[:, 0], "y_true_m": res.query_ref_xy[:, 1],
+                "error_m": err if err is not None else np.full(len(q), np.nan),
+            }))
+    tracks = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
+    with ws.writing("evaluate") as w:
+        w.table("evaluate.tracks", tracks)
+        if len(tracks):
+            w.table("evaluate.errors", tracks[["map", "localizer", "walk_id", "t_s", "error_m"]])
+        import matplotlib
+
+        matplotlib.use("Agg")
+        w.figure("evaluate.cdf_png", res.cdf_figure())
+        w.config(to_toml(cfg, "evaluate") + "\n" + to_toml(map_cfg, "map"))
+        w.report = report
+    if viewer is not None:
+        viewer.log_tracks(tracks)
+    return report, res.table()

@@ -1,0 +1,74 @@
+"""`rmbuild export-map`: rasterise the aligned fingerprints into a radio map, in several formats."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from rmbuild.config import MapConfig, to_toml
+from rmbuild.io.anchors import read_anchors
+from rmbuild.io.workspace import Workspace
+from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.mapping import built_positions, place_with_anchors
+
+
+def run(
+    workspace: str | Path,
+    cfg: MapConfig,
+    anchors_path: str | Path | None = None,
+    progress: Progress | None = None,
+    viewer=None,
+) -> dict:
+    """Build the radio map from the optimised poses; returns the export-map report."""
+    from rmbuild.radiomap import build_radio_map
+
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    ws = Workspace.open(workspace)
+    ds = ws.read_dataset()
+    xy, info = built_positions(ws, ds, cfg)
+    if anchors_path is None and ws.exists("optimize.anchors"):
+        info["anchors"] = "used by optimize"
+    if anchors_path is not None:
+        if info["gauge"] == "anchors":
+            info["anchors_note"] = "optimize already placed the walks with anchors; --anchors ignored"
+        else:
+            xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), read_anchors(anchors_path))
+            info.update(extra)
+    progress.phase("rasterising")
+    rm = build_radio_map(ds.wifi, xy, ds.poses["walk_id"].astype(str).to_numpy(), cfg, frame=info["frame"])
+    t_build = time.perf_counter() - t0
+    walls = ds.venue if (ds.venue is not None and info["frame"] == "building") else None
+    progress.phase("writing map")
+    node_pos = pd.DataFrame({"node": rm.nodes.node, "walk": rm.node_walk, "x_m": rm.node_xy[:, 0],
+                             "y_m": rm.node_xy[:, 1]})
+    with ws.writing("map") as w:
+        w.table("map.cells", rm.long_table())
+        w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
+        rm.wide_table("uji").to_csv(w.path("map.wide_csv"), index=False)
+        side = rm.sidecar()
+        side["frame_info"] = info
+        w.json("map.sidecar", side)
+        import matplotlib
+
+        matplotlib.use("Agg")
+        w.figure("map.coverage_png", rm.coverage_figure(walls=walls))
+        w.figure("map.heatmaps_png", rm.heatmaps_figure(walls=walls))
+        w.config(to_toml(cfg, "map"))
+        report = {
+            "stage": "export-map",
+            "frame": info["frame"],
+            "frame_info": info,
+            "cells": int(rm.n_cells),
+            "cells_interpolated": int(rm.cells["interpolated"].sum()) if "interpolated" in rm.cells else 0,
+            "reference_nodes": len(rm.nodes),
+            "aps": len(rm.bssids),
+            "cell_size_m": cfg.cell_size_m,
+            "time_s": {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)},
+        }
+        w.report = report
+    if viewer is not None:
+        viewer.log_radiomap(rm.long_table(), cfg.cell_size_m, rm.origin_xy)
+    return report

@@ -1,0 +1,54 @@
+"""Shared by export-map and evaluate: the optimised node positions the built map uses, and its frame."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmbuild.config import MapConfig
+from rmbuild.errors import InputError
+from rmbuild.evaluate.trajectory import align_se2, interpolate_xy
+from rmbuild.io.workspace import Workspace
+from rmbuild.types import Dataset
+
+
+def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndarray, dict]:
+    """(n_nodes, 2) optimised positions (NaN for walks left out) and a dict describing the frame.
+
+    The frame is "building" when optimize used anchors, otherwise the reference walk's own frame.
+    """
+    ws.require("optimize")
+    poses = ws.read_table("optimize.poses")
+    if len(poses) != ds.n_nodes or not (poses["walk_id"].to_numpy() == ds.poses["walk_id"].to_numpy()).all():
+        raise InputError(f"{ws.path('optimize.poses')}: does not match the ingested poses; re-run `rmbuild optimize`")
+    xy = poses[["x_m", "y_m"]].to_numpy(dtype=float).copy()
+    report = ws.read_report("optimize") or {}
+    walks = ws.read_table("optimize.walks")
+    info: dict = {"gauge": report.get("gauge", "se2"), "left_out_walks": []}
+    if "linked" in walks and not cfg.include_unlinked_walks:
+        unlinked = set(walks.loc[~walks["linked"].astype(bool), "walk_id"].astype(str))
+        info["left_out_walks"] = sorted(unlinked)
+        xy[ds.poses["walk_id"].astype(str).isin(unlinked).to_numpy()] = np.nan
+    ref = report.get("reference_walk")
+    info["frame"] = "building" if info["gauge"] == "anchors" else f"walk:{ref}" if ref else "reference walk"
+    return xy, info
+
+
+def place_with_anchors(xy: np.ndarray, ds: Dataset, optimized_poses, anchors) -> tuple[np.ndarray, dict]:
+    """One SE(2) from the optimised positions at the anchors' times to the anchors (>= 2 anchors)."""
+    src, dst = [], []
+    for wid, g in anchors.groupby("walk_id", sort=False):
+        if str(wid) not in set(ds.poses["walk_id"].astype(str)):
+            raise InputError(f"anchors: unknown walk {wid!r}")
+        p = interpolate_xy(optimized_poses, str(wid), g["t_s"].to_numpy(float))
+        if not np.isfinite(p).all():
+            raise InputError(f"anchors: a time of walk {wid!r} lies outside the walk's time span")
+        src.append(p)
+        dst.append(g[["x_m", "y_m"]].to_numpy(float))
+    src_a, dst_a = np.vstack(src), np.vstack(dst)
+    if len(src_a) < 2:
+        raise InputError("anchors: placing a map in the building frame needs at least 2 anchors")
+    r, t = align_se2(src_a, dst_a)
+    res = np.hypot(*(src_a @ r.T + t - dst_a).T)
+    return xy @ r.T + t, {"frame": "building", "anchor_fit": {
+        "n": len(src_a), "rotation_deg": float(np.degrees(np.arctan2(r[1, 0], r[0, 0]))),
+        "residual_rms_m": float(np.sqrt((res ** 2).mean()))}}
