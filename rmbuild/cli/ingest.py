@@ -32,3 +32,5 @@ def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
             f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes) -> {workspace}"
             + (f"; skipped {skipped}" if skipped else "")
         )
+        for note in s["notes"]:
+            click.echo(f"note: {note}", err=True)

@@ -126,6 +126,7 @@ class _Trace:
     waypoint_lines: np.ndarray
     skipped: Counter
     n_wifi_stale: int
+    n_wifi_dup: int = 0
 
 
 #: per used type: field positions of the numeric values and of the text values
@@ -338,6 +339,17 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
     fresh = (w.t_ms - w.num[:, 2]) <= opts.msft_ilc.max_wifi_age_s * 1000.0
     n_stale = int((~fresh).sum())
     idx = np.flatnonzero(fresh)
+    # one reading per (scan time, BSSID): phones list a BSSID twice when it is heard on two channels;
+    # keep the row seen most recently
+    if len(idx):
+        order = np.lexsort((-w.num[idx, 2], bssid[idx], w.t_ms[idx]))
+        idx = idx[order]
+        key_t, key_b = w.t_ms[idx], bssid[idx]
+        first = np.r_[True, (key_t[1:] != key_t[:-1]) | (key_b[1:] != key_b[:-1])]
+        n_dup = int((~first).sum())
+        idx = idx[first]
+    else:
+        n_dup = 0
     idx = idx[np.argsort(w.t_ms[idx], kind="stable")]
     wifi = pd.DataFrame({
         "walk_id": pd.Series([wid] * len(idx), dtype=object), "t_s": w.t_ms[idx] / 1000.0,
@@ -352,7 +364,8 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
         "label": pd.Series([f"wp{k}" for k in range(len(wp.t_s))], dtype=object),
         "floor": pd.Series([floor] * len(wp.t_s), dtype=object),
     })
-    return _Trace(wid, device, floor, acc, gyr, rot, wifi, w.line[idx], waypoints, wp.line, skipped, n_stale)
+    return _Trace(wid, device, floor, acc, gyr, rot, wifi, w.line[idx], waypoints, wp.line, skipped, n_stale,
+                  n_dup)
 
 
 @register
@@ -387,7 +400,7 @@ class MsftIlcReader(Reader):
         walks, poses, wifi, fixes = [], [], [], []
         wifi_lines, fix_lines = [], []
         skipped: Counter = Counter()
-        n_stale = n_wifi = 0
+        n_stale = n_wifi = n_dup = 0
         for f in traces:
             tr = parse_trace(f, opts)
             if tr.walk_id in seen:
@@ -420,10 +433,14 @@ class MsftIlcReader(Reader):
                           "source": FORMAT_NAME})
             skipped.update(tr.skipped)
             n_stale += tr.n_wifi_stale
-            n_wifi += tr.n_wifi_stale + len(tr.wifi)
+            n_dup += tr.n_wifi_dup
+            n_wifi += tr.n_wifi_stale + tr.n_wifi_dup + len(tr.wifi)
         if n_wifi:
             notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
                          f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
+        if n_dup:
+            notes.append(f"merged {n_dup:,} Wi-Fi rows repeating a BSSID within one scan (heard on two channels; "
+                         "the most recently seen row kept)")
         pose_df = pd.concat(poses, ignore_index=True)
         notes.append(f"PDR: {len(pose_df) - len(poses):,} steps in {len(poses)} walks ({opts.step_detector} "
                      f"steps, {opts.heading_source} heading, {opts.step_length_model} step length)")
