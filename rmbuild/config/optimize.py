@@ -1,0 +1,207 @@
+"""Config of `rmbuild optimize` (METHOD.md §2-6; seed 001 numbers are marked "paper").
+
+Two pipelines share these fields:
+- ``pipeline = "robust"`` (default): top-k run-matched cross-walk candidates, per-walk-pair RANSAC
+  verification, global initialisation of every walk's frame, realistic odometry noise, an outer loop
+  that keeps only in-range pairs, fold/shrink checks.
+- ``pipeline = "paper"``: seed 001 as written: every walk starts at the origin, median-window pairs
+  (eq. 9), fuzzy factors (eq. 10), odometry Ω = diag(1, 1, μ), one LM solve. Get it from
+  :func:`paper_config`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    # m; per-step 1-sigma of the body-frame increment along / across the walking direction.
+    # paper: 1 m (Ω = diag(1/m², 1/m², μ/rad²)); a foot IMU is good to a few cm per 0.7 m step.
+    sigma_x_m: float = 0.05
+    sigma_y_m: float = 0.05
+    # 1/rad²; heading information per step, sigma_theta = 1/sqrt(mu). paper: 20 (0.22 rad per step).
+    mu: float = 1000.0
+
+    def validate(self) -> None:
+        if self.sigma_x_m <= 0 or self.sigma_y_m <= 0 or self.mu <= 0:
+            raise ValueError("odometry sigmas and mu must be > 0")
+
+
+@dataclass(frozen=True)
+class PairConfig:
+    # dBm; value of a missing AP reading in the RSS distance (eq. 9). paper: -110.
+    fill_dbm: float = -110.0
+    # steps; L, the sliding window k-L/2..k+L/2 whose median RSS distance d_med(k) is node k's threshold.
+    # The median is over d(k, q) for every other *scanned* node q of k's walk inside the window.
+    L_window_steps: int = 20
+    # s / m; same-walk pairs closer than this in time or in walked (PDR path) distance are not searched.
+    within_min_dt_s: float = 30.0
+    within_min_path_m: float = 15.0
+    # pairs; at most this many vicinity pairs per node (the closest in RSS distance). 0 = no cap.
+    max_pairs_per_node: int = 10
+    # APs; a pair needs at least this many APs seen by both fingerprints.
+    min_common_aps: int = 3
+    # --- robust pipeline only ---
+    # scans; consecutive scans of one walk averaged into a segment descriptor for the candidate search.
+    segment_scans: int = 2
+    # candidates; nearest segments of *other* walks kept per segment (top-k) before verification.
+    top_k: int = 8
+    # keep a segment candidate only if it is also among the other's top-k (mutual nearest neighbours).
+    mutual: bool = True
+    # scans; half-length r of the run of consecutive scans compared for a node pair (2r+1 scans,
+    # same or opposite walking direction, the better of the two).
+    run_half_scans: int = 2
+    # search within-walk pairs too (loop closures), verified against the walk's own PDR geometry.
+    within_walk: bool = True
+    # m; a within-walk pair is kept when its PDR distance is below this plus drift_per_m times the
+    # path walked between the two nodes.
+    within_gate_m: float = 3.0
+    within_drift_per_m: float = 0.02
+    # fingerprint rows per block of the blocked matrix-product search (memory ~ block * n * 4 bytes).
+    block_rows: int = 2048
+
+    def validate(self) -> None:
+        if self.L_window_steps < 2:
+            raise ValueError("L_window_steps must be >= 2")
+        if self.max_pairs_per_node < 0 or self.top_k < 1 or self.segment_scans < 1:
+            raise ValueError("max_pairs_per_node >= 0, top_k >= 1, segment_scans >= 1 required")
+        if self.run_half_scans < 0 or self.block_rows < 16 or self.min_common_aps < 0:
+            raise ValueError("run_half_scans >= 0, block_rows >= 16, min_common_aps >= 0 required")
+
+
+@dataclass(frozen=True)
+class VicinityConfig:
+    # m; eq. 10: zero error below d_min, linear ramp to e_max at d_max, flat beyond. paper: 2 / 30.
+    d_min: float = 0.0
+    d_max: float = 6.0
+    # e_max (unitless) and Ω_WiFi (information of e); the plateau costs Ω_WiFi·e_max² (paper: not given).
+    e_max: float = 1.0
+    omega_wifi: float = 4.0
+    # how eq. 10 is expressed in GTSAM (bench/bench_optimize.py measures them):
+    # "range_tls": RangeFactorPose2(measured=d_min) + TruncatedLeastSquares (exact for d >= d_min, a tiny
+    #   push-apart below d_min); "range_custom": RangeFactorPose2(measured=0) + a Python m-estimator with a
+    #   dead zone (exact everywhere); "custom_factor": a Python CustomFactor (exact, slowest).
+    kernel: Literal["range_tls", "range_custom", "custom_factor"] = "range_tls"
+
+    def validate(self) -> None:
+        if not 0 <= self.d_min < self.d_max:
+            raise ValueError("need 0 <= d_min < d_max")
+        if self.e_max <= 0 or self.omega_wifi <= 0:
+            raise ValueError("e_max and omega_wifi must be > 0")
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    # "ransac": walk-level SE(2) (or translation-only with known heading) RANSAC from cross-walk pairs,
+    # chained and refined on a walk-level pose graph; "origin": every walk at (0, 0, 0) (paper).
+    method: Literal["ransac", "origin"] = "ransac"
+    # use yaw_abs_rad (magnetometer heading) when present: per-walk frame rotation and heading prior.
+    use_abs_heading: bool = True
+    # rad; floor of the 1-sigma of a walk's frame rotation from its yaw_abs (the circular mean over its
+    # steps). The sigma used is max(floor, yaw_abs_sigma / sqrt(n_steps / abs_heading_corr_steps)).
+    abs_heading_sigma_rad: float = 0.02
+    # steps; correlation length of the magnetometer's indoor disturbance (samples this far apart count as
+    # independent heading observations).
+    abs_heading_corr_steps: int = 10
+    # rad; yaw_abs sigma used where the poses table gives none (NaN yaw_abs_sigma_rad).
+    default_yaw_sigma_rad: float = 0.25
+    # m; a candidate pair is a RANSAC inlier when the hypothesis puts its two nodes within this distance.
+    ransac_gate_m: float = 3.0
+    # hypotheses per walk pair (unknown heading: 2-pair samples; known heading: all singles up to this).
+    ransac_iterations: int = 300
+    # RNG seed of the sampler (results are deterministic).
+    seed: int = 0
+    # a walk pair is accepted with at least this many inliers, this inlier fraction and this much shared
+    # path (m; walked length of the inlier stretch on the shorter side).
+    min_inliers: int = 5
+    min_inlier_ratio: float = 0.2
+    min_shared_path_m: float = 8.0
+    # rad; when the heading is known, re-fit the rotation from the inliers only if the shared path is long
+    # enough (m) to observe it; otherwise keep the magnetometer rotation.
+    refit_rotation_min_path_m: float = 20.0
+
+    def validate(self) -> None:
+        if self.abs_heading_corr_steps < 1 or self.default_yaw_sigma_rad <= 0:
+            raise ValueError("abs_heading_corr_steps >= 1 and default_yaw_sigma_rad > 0 required")
+        if self.abs_heading_sigma_rad <= 0 or self.ransac_gate_m <= 0:
+            raise ValueError("abs_heading_sigma_rad and ransac_gate_m must be > 0")
+        if self.ransac_iterations < 1 or self.min_inliers < 2 or not 0 <= self.min_inlier_ratio <= 1:
+            raise ValueError("ransac_iterations >= 1, min_inliers >= 2, 0 <= min_inlier_ratio <= 1 required")
+
+
+@dataclass(frozen=True)
+class SolveConfig:
+    # Levenberg-Marquardt iterations per solve, and its relative / absolute cost-decrease stops.
+    max_iterations: int = 15
+    relative_error_tol: float = 1e-3
+    absolute_error_tol: float = 1e-6
+    # "METIS" or "COLAMD" elimination ordering (FINDINGS: METIS ~3x faster at 50k poses).
+    ordering: Literal["METIS", "COLAMD"] = "METIS"
+    # poses; below this COLAMD is used whatever ``ordering`` says (METIS only pays off on big graphs).
+    metis_min_poses: int = 5000
+    # outer loop: after each solve keep only pairs whose current distance is below d_max (the rest add
+    # nothing but fill-in), then solve again; at most this many solves.
+    outer_iterations: int = 3
+    # one walk-by-walk pass is implied by the initialisation; the joint solve uses these priors:
+    # m / rad; 1-sigma of the gauge prior on the reference walk's first pose.
+    gauge_sigma_m: float = 1e-3
+    gauge_sigma_rad: float = 1e-4
+    # m; 1-sigma of an anchor position prior.
+    anchor_sigma_m: float = 0.5
+    # steps; per-pose heading prior from yaw_abs in the joint solve on every n-th step (0 = off), with
+    # the step's yaw_abs_sigma_rad times heading_prior_sigma_scale (n ~ the disturbance's correlation
+    # length, so the priors are roughly independent). They also correct the PDR's heading drift.
+    heading_prior_every_n: int = 10
+    heading_prior_sigma_scale: float = 3.0
+    # checks: a solution whose per-step odometry residual RMS exceeds this many sigmas, or a walk whose
+    # extent shrinks below this fraction of its raw PDR extent, is "worse by construction": the solver
+    # falls back to the initial poses for the whole map (reported in warnings).
+    max_odometry_rms_sigma: float = 5.0
+    min_extent_ratio: float = 0.8
+
+    def validate(self) -> None:
+        if self.max_iterations < 1 or self.outer_iterations < 1 or self.heading_prior_every_n < 0:
+            raise ValueError("max_iterations >= 1, outer_iterations >= 1, heading_prior_every_n >= 0")
+        if self.heading_prior_sigma_scale <= 0:
+            raise ValueError("heading_prior_sigma_scale must be > 0")
+        if self.gauge_sigma_m <= 0 or self.gauge_sigma_rad <= 0 or self.anchor_sigma_m <= 0:
+            raise ValueError("gauge and anchor sigmas must be > 0")
+
+
+@dataclass(frozen=True)
+class OptimizeConfig:
+    # "robust" (rmbuild's pipeline) or "paper" (seed 001 as written; see paper_config()).
+    pipeline: Literal["robust", "paper"] = "robust"
+    # walk_id of the reference walk whose first pose is fixed; "" = the walk with most cross-walk links.
+    reference_walk: str = ""
+    # what to do with a walk of fewer than 2 poses: "error" (InputError) or "skip" (kept at its raw pose,
+    # reported unlinked with a warning).
+    single_step_walks: Literal["error", "skip"] = "skip"
+    # test hook: fraction of vicinity pairs replaced by random false pairs before solving (robustness test).
+    inject_false_pairs: float = 0.0
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    pairs: PairConfig = field(default_factory=PairConfig)
+    vicinity: VicinityConfig = field(default_factory=VicinityConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    solve: SolveConfig = field(default_factory=SolveConfig)
+
+    def validate(self) -> None:
+        if not 0 <= self.inject_false_pairs < 1:
+            raise ValueError("inject_false_pairs must be in [0, 1)")
+        for sub in (self.odometry, self.pairs, self.vicinity, self.init, self.solve):
+            sub.validate()
+
+
+def paper_config(**overrides) -> OptimizeConfig:
+    """Seed 001's model: origin start, median-window pairs, Ω_IMU = diag(1, 1, 20), d_min 2 m, d_max 30 m."""
+    cfg = OptimizeConfig(
+        pipeline="paper",
+        odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0),
+        vicinity=VicinityConfig(d_min=2.0, d_max=30.0, e_max=1.0, omega_wifi=1.0),
+        init=InitConfig(method="origin", use_abs_heading=False),
+        solve=SolveConfig(outer_iterations=1, heading_prior_every_n=0, max_iterations=50,
+                          max_odometry_rms_sigma=1e9, min_extent_ratio=0.0),
+    )
+    return replace(cfg, **overrides)

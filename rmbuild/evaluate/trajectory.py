@@ -1,0 +1,179 @@
+"""Trajectory metrics: SE(2) alignment, ATE, landmark error, heading alignment error (no gtsam).
+
+Conventions: positions are (n, 2) arrays in metres; a rigid 2-D transform is ``(R (2, 2), t (2,))`` with
+``dst ≈ R @ src + t``. Every metric returns ``None`` when it cannot be computed (no truth, no fixes, too
+few points), so a report can write ``null`` instead of leaving the key out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+
+def align_se2(
+    src_xy: np.ndarray, dst_xy: np.ndarray, weights: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares rigid 2-D transform (rotation R (2, 2), translation t (2,)) with dst ≈ R @ src + t.
+
+    ``src_xy``, ``dst_xy``: (n, 2) metres; ``weights``: (n,) non-negative or None. Umeyama without scale.
+    With a single point (or all weight on one point) the rotation is the identity.
+    """
+    src = np.asarray(src_xy, dtype=float).reshape(-1, 2)
+    dst = np.asarray(dst_xy, dtype=float).reshape(-1, 2)
+    if len(src) != len(dst) or len(src) == 0:
+        raise ValueError("align_se2 needs two non-empty point sets of the same length")
+    w = np.ones(len(src)) if weights is None else np.asarray(weights, dtype=float)
+    if w.sum() <= 0:
+        raise ValueError("align_se2 needs positive total weight")
+    w = w / w.sum()
+    mu_s = w @ src
+    mu_d = w @ dst
+    cov = ((dst - mu_d) * w[:, None]).T @ (src - mu_s)
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(u @ vt)) or 1.0
+    r = u @ np.diag([1.0, d]) @ vt
+    t = mu_d - r @ mu_s
+    return r, t
+
+
+def rotation_angle_rad(r: np.ndarray) -> float:
+    """The angle (rad, in (-pi, pi]) of a 2-D rotation matrix."""
+    return float(math.atan2(r[1, 0], r[0, 0]))
+
+
+def _stats(err: np.ndarray) -> dict[str, float]:
+    return {
+        "rmse": float(np.sqrt(np.mean(err**2))),
+        "mean": float(np.mean(err)),
+        "median": float(np.median(err)),
+        "max": float(np.max(err)),
+    }
+
+
+def ate(est_xy: np.ndarray, true_xy: np.ndarray, align: bool = True) -> dict[str, float] | None:
+    """Absolute trajectory error (m): rmse, mean, median, max of ‖est − true‖.
+
+    ``align``: first fit one rigid SE(2) transform est -> true over all points (evo's APE with SE(2)
+    alignment); off when anchors already put the estimate into the building frame.
+    """
+    est = np.asarray(est_xy, dtype=float).reshape(-1, 2)
+    tru = np.asarray(true_xy, dtype=float).reshape(-1, 2)
+    ok = np.isfinite(est).all(axis=1) & np.isfinite(tru).all(axis=1)
+    if ok.sum() == 0:
+        return None
+    est, tru = est[ok], tru[ok]
+    if align:
+        r, t = align_se2(est, tru)
+        est = est @ r.T + t
+    return _stats(np.linalg.norm(est - tru, axis=1))
+
+
+def interpolate_xy(poses: pd.DataFrame, walk_id: str, t_s: np.ndarray) -> np.ndarray:
+    """Positions (len(t_s), 2) of one walk at times ``t_s`` (linear between poses; NaN outside the span)."""
+    w = poses[poses["walk_id"] == walk_id]
+    out = np.full((len(t_s), 2), np.nan)
+    if len(w) == 0:
+        return out
+    tt = w["t_s"].to_numpy(dtype=float)
+    inside = (t_s >= tt[0]) & (t_s <= tt[-1])
+    for j, col in enumerate(("x_m", "y_m")):
+        out[inside, j] = np.interp(t_s[inside], tt, w[col].to_numpy(dtype=float))
+    return out
+
+
+def landmark_error(
+    poses: pd.DataFrame, fixes: pd.DataFrame, world_R: np.ndarray | None = None, world_t: np.ndarray | None = None
+) -> dict[str, float] | None:
+    """Error (m) at landmark fixes: mean, std, max, n.
+
+    ``poses``: walk_id, t_s, x_m, y_m (estimate); ``fixes``: walk_id, t_s, x_m, y_m (truth, building frame).
+    The estimate at each fix's time is interpolated between poses of the fix's walk, then mapped by the
+    optional global alignment ``world_R @ p + world_t`` (from :func:`align_se2` on all poses).
+    """
+    if fixes is None or len(fixes) == 0:
+        return None
+    est = np.full((len(fixes), 2), np.nan)
+    fw = fixes["walk_id"].astype(str).to_numpy()
+    ft = fixes["t_s"].to_numpy(dtype=float)
+    for wid in np.unique(fw):
+        m = fw == wid
+        est[m] = interpolate_xy(poses, wid, ft[m])
+    if world_R is not None:
+        est = est @ np.asarray(world_R).T + (0 if world_t is None else np.asarray(world_t))
+    ok = np.isfinite(est).all(axis=1)
+    if ok.sum() == 0:
+        return None
+    err = np.linalg.norm(est[ok] - fixes[["x_m", "y_m"]].to_numpy(dtype=float)[ok], axis=1)
+    return {"mean": float(err.mean()), "std": float(err.std()), "max": float(err.max()), "n": int(ok.sum())}
+
+
+def heading_alignment_error_deg(
+    poses: pd.DataFrame, truth: pd.DataFrame, world_R: np.ndarray | None = None
+) -> dict[str, float] | None:
+    """Per-walk heading alignment error (deg): mean and std over walks of |rotation of walk vs truth|.
+
+    ``poses`` and ``truth`` have the same rows (walk_id, x_m, y_m). After the single global rotation
+    ``world_R`` (if given), each walk's estimated trajectory is fitted rigidly onto its true one; the
+    fitted rotation angle is how far that walk's frame is turned against truth (seed 001's 12-walk figure).
+    Walks with fewer than 2 distinct positions are skipped.
+    """
+    if truth is None or len(truth) != len(poses):
+        return None
+    est = poses[["x_m", "y_m"]].to_numpy(dtype=float)
+    if world_R is not None:
+        est = est @ np.asarray(world_R).T
+    tru = truth[["x_m", "y_m"]].to_numpy(dtype=float)
+    errs = []
+    wids = poses["walk_id"].astype(str).to_numpy()
+    for wid in pd.unique(wids):
+        m = wids == wid
+        if m.sum() < 2 or np.ptp(tru[m], axis=0).max() < 1e-6:
+            continue
+        r, _ = align_se2(est[m], tru[m])
+        errs.append(abs(math.degrees(rotation_angle_rad(r))))
+    if not errs:
+        return None
+    e = np.asarray(errs)
+    return {"mean": float(e.mean()), "std": float(e.std())}
+
+
+def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True) -> dict:
+    """The METRICS block of ``reports/optimize.json`` for one set of poses (issue 3).
+
+    ``poses_df``: walk_id, step, t_s, x_m, y_m, heading_rad in ``dataset.poses`` row order (e.g. the raw
+    poses, or the optimised ones). ``align``: one SE(2) fit of all walks onto truth first (no anchors).
+    The landmark and heading figures use that same global fit (fitted on truth poses when they exist,
+    otherwise on the fixes). Returns ``{"ate_m", "landmark_error_m", "heading_alignment_error_deg"}``
+    with ``None`` for what cannot be computed.
+    """
+    truth = getattr(dataset, "truth_poses", None)
+    fixes = getattr(dataset, "fixes", None)
+    has_truth = truth is not None and len(truth) == len(poses_df) and len(truth) > 0
+    world_R, world_t = np.eye(2), np.zeros(2)
+    if align:
+        if has_truth:
+            world_R, world_t = align_se2(
+                poses_df[["x_m", "y_m"]].to_numpy(float), truth[["x_m", "y_m"]].to_numpy(float)
+            )
+        elif fixes is not None and len(fixes) >= 2:
+            ft = fixes["t_s"].to_numpy(float)
+            est = np.full((len(fixes), 2), np.nan)
+            fw = fixes["walk_id"].astype(str).to_numpy()
+            for wid in np.unique(fw):
+                m = fw == wid
+                est[m] = interpolate_xy(poses_df, wid, ft[m])
+            ok = np.isfinite(est).all(axis=1)
+            if ok.sum() >= 2:
+                world_R, world_t = align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])
+    out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}
+    if has_truth:
+        out["ate_m"] = ate(
+            poses_df[["x_m", "y_m"]].to_numpy(float), truth[["x_m", "y_m"]].to_numpy(float), align=align
+        )
+        out["heading_alignment_error_deg"] = heading_alignment_error_deg(poses_df, truth, world_R)
+    if fixes is not None and len(fixes) > 0:
+        out["landmark_error_m"] = landmark_error(poses_df, fixes, world_R, world_t)
+    return out

@@ -1,0 +1,147 @@
+"""GTSAM keys, Values conversion and the factors of the rmbuild pose graph.
+
+Key scheme: pose node i (row i of ``Dataset.poses``) is ``X(i) = gtsam.symbol('x', i)``; walk-level
+frames in the initialisation graph are ``W(w) = gtsam.symbol('w', w)`` (w = walk index).
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from rmbuild.config.optimize import OdometryConfig, VicinityConfig
+
+
+def X(i: int) -> int:
+    """Key of pose node i."""
+    return gtsam.symbol("x", int(i))
+
+
+def W(w: int) -> int:
+    """Key of walk w's frame (world_T_walk) in the walk-level graph."""
+    return gtsam.symbol("w", int(w))
+
+
+def poses_to_values(xyt: np.ndarray, key=X) -> gtsam.Values:
+    """Values with Pose2 ``key(i)`` = (x, y, theta) of row i of ``xyt`` (n, 3) [m, m, rad]."""
+    v = gtsam.Values()
+    for i, (x, y, t) in enumerate(np.asarray(xyt, dtype=float)):
+        v.insert(key(i), gtsam.Pose2(x, y, t))
+    return v
+
+
+def values_to_poses(values: gtsam.Values, n: int, key=X) -> np.ndarray:
+    """(n, 3) array [m, m, rad] of Pose2 ``key(0..n-1)`` (theta wrapped to (-pi, pi])."""
+    out = np.empty((n, 3))
+    for i in range(n):
+        p = values.atPose2(key(i))
+        out[i] = (p.x(), p.y(), p.theta())
+    return out
+
+
+def compose_se2(T: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """T (3,) = (x, y, theta) applied to poses p (n, 3): world poses of walk-frame poses."""
+    c, s = np.cos(T[2]), np.sin(T[2])
+    out = np.empty_like(p, dtype=float)
+    out[:, 0] = T[0] + c * p[:, 0] - s * p[:, 1]
+    out[:, 1] = T[1] + s * p[:, 0] + c * p[:, 1]
+    out[:, 2] = np.angle(np.exp(1j * (p[:, 2] + T[2])))
+    return out
+
+
+def relative_se2(p: np.ndarray) -> np.ndarray:
+    """Body-frame increments (n-1, 3) between consecutive poses p (n, 3) (seed 001 eq. 6)."""
+    d = p[1:, :2] - p[:-1, :2]
+    c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
+    return np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
+                 np.angle(np.exp(1j * (p[1:, 2] - p[:-1, 2])))]
+
+
+def odometry_noise(ocfg: OdometryConfig) -> gtsam.noiseModel.Base:
+    """Ω_IMU = diag(1/σx², 1/σy², μ) (seed 001 eq. 8)."""
+    return gtsam.noiseModel.Diagonal.Sigmas(np.array([ocfg.sigma_x_m, ocfg.sigma_y_m, 1 / np.sqrt(ocfg.mu)]))
+
+
+def add_odometry(graph: gtsam.NonlinearFactorGraph, raw: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+                 ocfg: OdometryConfig) -> int:
+    """BetweenFactorPose2 between consecutive nodes of each walk [starts[w], ends[w]); never across walks."""
+    noise = odometry_noise(ocfg)
+    n = 0
+    for s, e in zip(starts, ends):
+        u = relative_se2(raw[s:e])
+        for k in range(e - s - 1):
+            graph.add(gtsam.BetweenFactorPose2(X(s + k), X(s + k + 1), gtsam.Pose2(*u[k]), noise))
+            n += 1
+    return n
+
+
+def fuzzy_error(d: np.ndarray, vcfg: VicinityConfig) -> np.ndarray:
+    """Seed 001 eq. 10: e(d) = 0 below d_min, e_max beyond d_max, linear in between (d in metres)."""
+    d = np.asarray(d, dtype=float)
+    return vcfg.e_max * np.clip((d - vcfg.d_min) / (vcfg.d_max - vcfg.d_min), 0.0, 1.0)
+
+
+def fuzzy_cost(d: np.ndarray, vcfg: VicinityConfig) -> np.ndarray:
+    """GTSAM-convention factor error 0.5·Ω_WiFi·e(d)² of one vicinity factor."""
+    return 0.5 * vcfg.omega_wifi * fuzzy_error(d, vcfg) ** 2
+
+
+def _ramp_sigma(vcfg: VicinityConfig) -> float:
+    """Sigma (m) that makes the whitened range residual r = (d - d_min)/sigma equal sqrt(Ω)·e(d)."""
+    return (vcfg.d_max - vcfg.d_min) / (vcfg.e_max * np.sqrt(vcfg.omega_wifi))
+
+
+def vicinity_noise(vcfg: VicinityConfig) -> gtsam.noiseModel.Base:
+    """The robust noise model of a range-based fuzzy factor (kernel range_tls or range_custom)."""
+    sigma = _ramp_sigma(vcfg)
+    base = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
+    if vcfg.kernel == "range_tls":
+        est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(vcfg.e_max * np.sqrt(vcfg.omega_wifi))
+    else:
+        a, b = vcfg.d_min / sigma, vcfg.d_max / sigma
+
+        def loss(r: float) -> float:
+            r = abs(r)
+            return 0.0 if r < a else 0.5 * (min(r, b) - a) ** 2
+
+        def weight(r: float) -> float:
+            r = abs(r)
+            return 0.0 if (r <= a or r >= b) else (r - a) / r
+
+        est = gtsam.noiseModel.mEstimator.Custom(weight, loss)
+    return gtsam.noiseModel.Robust.Create(est, base)
+
+
+def _custom_error_fn(vcfg: VicinityConfig):
+    sigma = _ramp_sigma(vcfg)
+
+    def err(this: gtsam.CustomFactor, v: gtsam.Values, H):
+        k1, k2 = this.keys()
+        p, q = v.atPose2(k1), v.atPose2(k2)
+        dx, dy = q.x() - p.x(), q.y() - p.y()
+        d = max(np.hypot(dx, dy), 1e-9)
+        inside = vcfg.d_min < d < vcfg.d_max
+        e = (min(max(d, vcfg.d_min), vcfg.d_max) - vcfg.d_min) / sigma
+        if H is not None:
+            g = (1.0 / sigma) if inside else 0.0
+            # derivative w.r.t. body-frame increments (Pose2 retract: x ⊕ ξ moves by R(θ)ξ_xy)
+            cp, sp = np.cos(p.theta()), np.sin(p.theta())
+            cq, sq = np.cos(q.theta()), np.sin(q.theta())
+            ux, uy = dx / d, dy / d
+            H[0] = np.array([[-g * (ux * cp + uy * sp), -g * (-ux * sp + uy * cp), 0.0]])
+            H[1] = np.array([[g * (ux * cq + uy * sq), g * (-ux * sq + uy * cq), 0.0]])
+        return np.array([e])
+
+    return err
+
+
+def vicinity_factor(k: int, q: int, vcfg: VicinityConfig, noise=None) -> gtsam.NonlinearFactor:
+    """One fuzzy vicinity factor between pose nodes k and q (eq. 10, in the configured kernel).
+
+    ``noise``: a shared noise model from :func:`vicinity_noise` (built once for many factors).
+    """
+    if vcfg.kernel == "custom_factor":
+        return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(1), [X(k), X(q)], _custom_error_fn(vcfg))
+    noise = noise if noise is not None else vicinity_noise(vcfg)
+    measured = vcfg.d_min if vcfg.kernel == "range_tls" else 0.0
+    return gtsam.RangeFactorPose2(X(k), X(q), measured, noise)

@@ -1,0 +1,255 @@
+"""Vicinity-pair search (METHOD.md §3-4).
+
+Two searches over the fingerprinted nodes ("rows"; row r is fingerprint r, node ``meta.node[r]``):
+
+- :func:`median_window_pairs` — seed 001 as written: node k's threshold is the median RSS distance inside
+  its own walk's window of L steps; (k, q) is a pair when d(k, q) < d_med(k), for q in any walk except
+  same-walk nodes near in time or in walked distance. Blocked all-pairs matrix products, capped per node.
+- :func:`run_matched_candidates` — rmbuild's candidates: consecutive scans are averaged into segments,
+  each segment keeps its top-k nearest segments of other walks (mutual), and each surviving segment pair
+  becomes the one node pair whose run of 2r+1 consecutive scans (same or opposite direction) matches best.
+
+Both return a DataFrame with columns row_k, row_q (row_k < row_q), rss_dist (eq. 9, dB), common (APs),
+kind ("within"/"cross") and, for candidates, run_dist (dB) and direction (+1 / -1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.optimize import PairConfig
+from rmbuild.slam.rss import RssMatrix
+
+Progress = Callable[[str, dict], None] | None
+
+
+@dataclass
+class RowMeta:
+    """Per fingerprint row: node id, walk index, step, time (s) and walked PDR path length (m)."""
+
+    node: np.ndarray
+    walk: np.ndarray
+    step: np.ndarray
+    t_s: np.ndarray
+    path_m: np.ndarray
+
+
+def _allowed(meta: RowMeta, rows: np.ndarray, cols: np.ndarray | slice, pcfg: PairConfig, within: bool):
+    """bool (len(rows), n_cols): pair may be searched (different walk, or same walk far in time and path)."""
+    cw = meta.walk[cols]
+    same = meta.walk[rows][:, None] == cw[None, :]
+    ok = ~same
+    if within:
+        far = (np.abs(meta.t_s[rows][:, None] - meta.t_s[cols][None, :]) >= pcfg.within_min_dt_s) & (
+            np.abs(meta.path_m[rows][:, None] - meta.path_m[cols][None, :]) >= pcfg.within_min_path_m
+        )
+        ok |= same & far
+    return ok
+
+
+def window_median(rm: RssMatrix, meta: RowMeta, L: int) -> np.ndarray:
+    """d_med (n,) float32: for row k, the median of d(k, q) over the other rows q of k's walk whose step
+    lies in k − L/2 … k + L/2 (NaN when the window holds no other scanned node)."""
+    n = len(rm)
+    half = L // 2
+    cols = []
+    for o in range(1, half + 1):
+        i = np.arange(n - o)
+        j = i + o
+        ok = (meta.walk[i] == meta.walk[j]) & (np.abs(meta.step[j] - meta.step[i]) <= half)
+        if not ok.any():
+            break
+        d = np.full(n - o, np.nan, np.float32)
+        d[ok], _ = rm.pairs(i[ok], j[ok])
+        fwd = np.full(n, np.nan, np.float32)
+        bwd = np.full(n, np.nan, np.float32)
+        fwd[:-o] = d
+        bwd[o:] = d
+        cols += [fwd, bwd]
+    if not cols:
+        return np.full(n, np.nan, np.float32)
+    stack = np.stack(cols, axis=1)
+    out = np.full(n, np.nan, np.float32)
+    has = ~np.isnan(stack).all(axis=1)
+    out[has] = np.nanmedian(stack[has], axis=1)
+    return out
+
+
+def _keep_smallest(rows: np.ndarray, cols: np.ndarray, d: np.ndarray, cap: int):
+    """Keep per row the ``cap`` entries with the smallest d (cap 0 = all)."""
+    if cap <= 0 or len(rows) == 0:
+        return rows, cols, d
+    order = np.lexsort((d, rows))
+    rows, cols, d = rows[order], cols[order], d[order]
+    start = np.r_[0, np.flatnonzero(np.diff(rows)) + 1]
+    rank = np.arange(len(rows)) - np.repeat(start, np.diff(np.r_[start, len(rows)]))
+    keep = rank < cap
+    return rows[keep], cols[keep], d[keep]
+
+
+def _dedupe(ri: np.ndarray, rj: np.ndarray, *cols: np.ndarray):
+    a, b = np.minimum(ri, rj), np.maximum(ri, rj)
+    key = a.astype(np.int64) * (1 << 32) + b
+    _, first = np.unique(key, return_index=True)
+    return (a[first], b[first]) + tuple(c[first] for c in cols)
+
+
+def median_window_pairs(
+    rm: RssMatrix, meta: RowMeta, pcfg: PairConfig, progress: Progress = None
+) -> tuple[pd.DataFrame, np.ndarray]:
+    """Seed 001's pair rule over all row pairs; returns (pairs, d_med per row).
+
+    Row k proposes q when d(k, q) < d_med(k), q allowed (see :func:`_allowed`), at least
+    ``min_common_aps`` shared APs; each row keeps its ``max_pairs_per_node`` closest proposals; the
+    union over both directions is returned once per unordered pair.
+    """
+    n = len(rm)
+    thr = window_median(rm, meta, pcfg.L_window_steps)
+    thr_f = np.where(np.isnan(thr), -np.inf, thr)
+    out_r, out_c, out_d = [], [], []
+    bs = pcfg.block_rows
+    for s in range(0, n, bs):
+        rows = np.arange(s, min(n, s + bs))
+        d, common = rm.block(rows)
+        mask = (d < thr_f[rows][:, None]) & (common >= pcfg.min_common_aps)
+        mask &= _allowed(meta, rows, slice(None), pcfg, within=True)
+        r, c = np.nonzero(mask)
+        r, c, dd = _keep_smallest(rows[r], c, d[r, c], pcfg.max_pairs_per_node)
+        out_r.append(r)
+        out_c.append(c)
+        out_d.append(dd)
+        if progress:
+            progress("pair_search", {"done": int(rows[-1] + 1), "total": n})
+    r = np.concatenate(out_r) if out_r else np.zeros(0, np.int64)
+    c = np.concatenate(out_c) if out_c else np.zeros(0, np.int64)
+    d = np.concatenate(out_d) if out_d else np.zeros(0, np.float32)
+    a, b, d = _dedupe(r, c, d)
+    _, common = rm.pairs(a, b)
+    df = pd.DataFrame({
+        "row_k": a, "row_q": b, "rss_dist": d, "common": common.astype(np.int32),
+        "kind": np.where(meta.walk[a] == meta.walk[b], "within", "cross"),
+    })
+    return df, thr
+
+
+def _segments(meta: RowMeta, seg: int) -> np.ndarray:
+    """Segment id (n,) per row: consecutive rows of one walk grouped ``seg`` at a time."""
+    n = len(meta.walk)
+    start = np.r_[True, meta.walk[1:] != meta.walk[:-1]]
+    walk_start_row = np.maximum.accumulate(np.where(start, np.arange(n), 0))
+    local = np.arange(n) - walk_start_row
+    new = start | (local % seg == 0)
+    return np.cumsum(new) - 1
+
+
+def run_matched_candidates(
+    rm: RssMatrix, meta: RowMeta, pcfg: PairConfig, progress: Progress = None
+) -> pd.DataFrame:
+    """rmbuild's candidate pairs: segment top-k (mutual) then the best run-matched node pair per segment pair."""
+    n = len(rm)
+    seg = _segments(meta, pcfg.segment_scans)
+    n_seg = int(seg.max()) + 1 if n else 0
+    cnt = np.bincount(seg, minlength=n_seg).astype(np.float32)
+    sa = np.zeros((n_seg, rm.a.shape[1]), np.float32)
+    sb = np.zeros_like(sa)
+    np.add.at(sa, seg, rm.a)
+    np.add.at(sb, seg, rm.b)
+    sa /= cnt[:, None]
+    sb /= cnt[:, None]
+    srm = RssMatrix(sa, sb, np.einsum("ij,ij->i", sa, sa, dtype=np.float64), sb.sum(axis=1, dtype=np.float64))
+    first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
+    smeta = RowMeta(meta.node[first], meta.walk[first], meta.step[first],
+                    np.bincount(seg, meta.t_s, n_seg) / cnt, np.bincount(seg, meta.path_m, n_seg) / cnt)
+    k = min(pcfg.top_k, max(n_seg - 1, 1))
+    nb = np.full((n_seg, k), -1, np.int64)
+    nbd = np.full((n_seg, k), np.inf, np.float32)
+    bs = max(16, pcfg.block_rows // 2)
+    for s in range(0, n_seg, bs):
+        rows = np.arange(s, min(n_seg, s + bs))
+        d, common = srm.block(rows)
+        bad = ~_allowed(smeta, rows, slice(None), pcfg, within=pcfg.within_walk)
+        bad |= common < pcfg.min_common_aps
+        d[bad] = np.inf
+        if n_seg > k:
+            idx = np.argpartition(d, k - 1, axis=1)[:, :k]
+        else:
+            idx = np.tile(np.arange(n_seg), (len(rows), 1))[:, :k]
+        nb[rows] = idx
+        nbd[rows] = np.take_along_axis(d, idx, axis=1)
+        if progress:
+            progress("pair_search", {"done": int(rows[-1] + 1), "total": n_seg, "phase": "segments"})
+    si = np.repeat(np.arange(n_seg), k)
+    sj = nb.ravel()
+    ok = np.isfinite(nbd.ravel())
+    si, sj = si[ok], sj[ok]
+    if pcfg.mutual:
+        key = set((si.astype(np.int64) * n_seg + sj).tolist())
+        back = np.fromiter(((b * n_seg + a) in key for a, b in zip(si.tolist(), sj.tolist())), bool, len(si))
+        si, sj = si[back], sj[back]
+    si, sj = np.minimum(si, sj), np.maximum(si, sj)
+    _, u = np.unique(si.astype(np.int64) * n_seg + sj, return_index=True)
+    si, sj = si[u], sj[u]
+    return _best_run_pairs(rm, meta, seg, first, cnt.astype(np.int64), si, sj, pcfg)
+
+
+def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: PairConfig) -> pd.DataFrame:
+    """For each segment pair, the node pair (i in si, j in sj) with the smallest mean RSS distance over a
+    run of 2r+1 consecutive rows of each walk, walked in the same (+1) or opposite (-1) direction."""
+    n = len(rm)
+    s, r = pcfg.segment_scans, pcfg.run_half_scans
+    off = np.arange(-r, s + r)
+    # extended row windows (rows outside the walk are marked invalid)
+    def window(sg):
+        rows = first[sg][:, None] + off[None, :]
+        valid = (rows >= 0) & (rows < n)
+        rc = np.clip(rows, 0, n - 1)
+        valid &= meta.walk[rc] == meta.walk[first[sg]][:, None]
+        return rc, valid
+
+    out = []
+    chunk = 4096
+    for c0 in range(0, len(si), chunk):
+        a_rows, a_ok = window(si[c0:c0 + chunk])
+        b_rows, b_ok = window(sj[c0:c0 + chunk])
+        A, Ab = rm.a[a_rows], rm.b[a_rows]
+        B, Bb = rm.a[b_rows], rm.b[b_rows]
+        dot = np.einsum("pim,pjm->pij", A, B)
+        com = np.einsum("pim,pjm->pij", Ab, Bb)
+        union = rm.cnt[a_rows][:, :, None] + rm.cnt[b_rows][:, None, :] - com
+        sq = rm.sq[a_rows][:, :, None] + rm.sq[b_rows][:, None, :] - 2 * dot
+        D = np.sqrt(np.maximum(sq, 0) / np.maximum(union, 1))
+        D[~(a_ok[:, :, None] & b_ok[:, None, :])] = np.nan
+        best = np.full(len(A), np.inf)
+        bi = np.zeros(len(A), np.int64)
+        bj = np.zeros(len(A), np.int64)
+        bdir = np.ones(len(A), np.int64)
+        for ii in range(r, r + s):
+            for jj in range(r, r + s):
+                for dr in (1, -1):
+                    vals = np.stack([D[:, ii + o, jj + dr * o] for o in range(-r, r + 1)], axis=1)
+                    m = np.nanmean(vals, axis=1) if r > 0 else vals[:, 0]
+                    nvalid = np.sum(~np.isnan(vals), axis=1)
+                    m = np.where((nvalid >= r + 1) & ~np.isnan(D[:, ii, jj]), m, np.inf)
+                    better = m < best
+                    best[better] = m[better]
+                    bi[better], bj[better], bdir[better] = ii, jj, dr
+        p = np.arange(len(A))
+        ri, rj = a_rows[p, bi], b_rows[p, bj]
+        valid = np.isfinite(best) & a_ok[p, bi] & b_ok[p, bj]
+        out.append(pd.DataFrame({
+            "row_k": ri[valid], "row_q": rj[valid], "rss_dist": D[p, bi, bj][valid].astype(np.float32),
+            "common": com[p, bi, bj][valid].astype(np.int32), "run_dist": best[valid].astype(np.float32),
+            "direction": bdir[valid],
+        }))
+    df = pd.concat(out, ignore_index=True) if out else pd.DataFrame(
+        columns=["row_k", "row_q", "rss_dist", "common", "run_dist", "direction"])
+    a = np.minimum(df["row_k"].to_numpy(), df["row_q"].to_numpy())
+    b = np.maximum(df["row_k"].to_numpy(), df["row_q"].to_numpy())
+    df["row_k"], df["row_q"] = a, b
+    df = df[df["common"] >= pcfg.min_common_aps].drop_duplicates(["row_k", "row_q"]).reset_index(drop=True)
+    df["kind"] = np.where(meta.walk[df["row_k"].to_numpy()] == meta.walk[df["row_q"].to_numpy()], "within", "cross")
+    return df

@@ -1,0 +1,541 @@
+"""`rmbuild.slam.optimize`: align every walk into one frame from Wi-Fi alone and optimise the pose graph.
+
+Pure and in-memory: takes a :class:`Dataset`, its :class:`Fingerprints` and an :class:`OptimizeConfig`,
+returns an :class:`OptimizeResult`. Progress is reported through ``progress(phase, info)`` callbacks
+(phases "pair_search", "init", "build", "solve"); nothing is printed.
+
+Pipeline (``cfg.pipeline``):
+- "robust": run-matched candidates → RANSAC-verified walk pairs → walk frames chained over a spanning
+  tree and refined on a walk-level graph → joint pose graph (odometry, fuzzy vicinity factors on pairs
+  consistent with the initialisation, magnetometer heading priors, gauge/anchors) solved by LM with METIS
+  in an outer loop that keeps only the pairs currently within d_max → fold/shrink and odometry checks.
+- "paper": seed 001 — every walk at the origin, median-window pairs, one LM solve.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+import pandas as pd
+
+from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.errors import InputError
+from rmbuild.slam.factors import (
+    X,
+    add_odometry,
+    compose_se2,
+    poses_to_values,
+    relative_se2,
+    values_to_poses,
+    vicinity_factor,
+    vicinity_noise,
+)
+from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
+from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates
+from rmbuild.slam.rss import RssMatrix
+from rmbuild.types import Dataset, Fingerprints
+
+log = logging.getLogger(__name__)
+Progress = Callable[[str, dict], None] | None
+
+POSE_OUT_COLUMNS = ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
+
+
+@dataclass
+class OptimizeResult:
+    """What :func:`optimize` returns.
+
+    ``poses`` / ``initial_poses``: walk_id, step, t_s, x_m, y_m, heading_rad in the common frame (the
+    reference walk's own frame, or the building frame with anchors), rows as ``dataset.poses``.
+    ``pairs``: the vicinity factors of the final solve: node_k, node_q, walk_k, walk_q, kind, rss_dist,
+    common, init_dist_m, final_dist_m, final_error (eq. 10 e), in_range (d < d_max at the end).
+    ``candidates``: every pair the search produced (before verification), with ``used`` and ``injected``.
+    ``walks``: per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, shared_path_m,
+    n_partner_walks, world_T_walk_x_m / _y_m / _theta_rad, extent_ratio, confidence (0-1), heading_known.
+    ``stats``: factor counts, costs, iterations, time_s per phase, cost_history, warnings, ... (JSON-able).
+    """
+
+    poses: pd.DataFrame
+    initial_poses: pd.DataFrame
+    pairs: pd.DataFrame
+    candidates: pd.DataFrame
+    walks: pd.DataFrame
+    stats: dict
+    cost_history: list[float] = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------------------------- checks
+def _check_inputs(dataset: Dataset, fp: Fingerprints, cfg: OptimizeConfig) -> tuple[np.ndarray, list[str]]:
+    """Validate; returns (keep mask over walks, warnings)."""
+    poses = dataset.poses
+    if poses is None or len(poses) == 0:
+        raise InputError("no poses: the dataset has no walk poses to optimise")
+    for col in ("walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"):
+        if col not in poses:
+            raise InputError(f"poses table lacks column {col!r}")
+    bad = poses[["t_s", "x_m", "y_m", "heading_rad"]].isna().any(axis=1).to_numpy()
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise InputError(f"NaN in poses (first at node {r}, walk {poses['walk_id'].iloc[r]!s}, "
+                         f"step {poses['step'].iloc[r]}); fix or drop those steps")
+    if fp is None or len(fp) == 0:
+        raise InputError("no Wi-Fi fingerprints: no pose node has a Wi-Fi reading attached")
+    if fp.node.min() < 0 or fp.node.max() >= len(poses):
+        raise InputError("fingerprint node ids outside the poses table")
+    warnings: list[str] = []
+    sizes = poses.groupby("walk_id", sort=False).size()
+    keep = np.ones(len(dataset.walks), bool)
+    for i, wid in enumerate(dataset.walks["walk_id"]):
+        nwk = int(sizes.get(wid, 0))
+        if nwk < 2:
+            if cfg.single_step_walks == "error":
+                raise InputError(f"walk {wid!s} has {nwk} pose(s); a walk needs at least 2 steps")
+            keep[i] = False
+            warnings.append(f"walk {wid!s} has {nwk} pose(s): skipped (kept at its raw pose, unlinked)")
+    return keep, warnings
+
+
+def _anchor_nodes(anchors: pd.DataFrame, poses: pd.DataFrame, slices: dict[str, slice]) -> np.ndarray:
+    """Node id of the pose nearest in time to each anchor; InputError outside a walk's time span."""
+    for col in ("walk_id", "t_s", "x_m", "y_m"):
+        if col not in anchors:
+            raise InputError(f"anchors table lacks column {col!r}")
+    t = poses["t_s"].to_numpy(float)
+    out = np.empty(len(anchors), np.int64)
+    for i, (wid, ta) in enumerate(zip(anchors["walk_id"].astype(str), anchors["t_s"].to_numpy(float))):
+        if wid not in slices:
+            raise InputError(f"anchor {i}: unknown walk {wid!r}")
+        s = slices[wid]
+        tt = t[s]
+        if not (tt[0] <= ta <= tt[-1]) or not np.isfinite(ta):
+            raise InputError(f"anchor {i}: t_s={ta} is outside walk {wid}'s time span [{tt[0]}, {tt[-1]}]")
+        out[i] = s.start + int(np.argmin(np.abs(tt - ta)))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- helpers
+def _poses_df(dataset: Dataset, xyt: np.ndarray) -> pd.DataFrame:
+    p = dataset.poses
+    return pd.DataFrame({
+        "walk_id": p["walk_id"].to_numpy(), "step": p["step"].to_numpy(), "t_s": p["t_s"].to_numpy(float),
+        "x_m": xyt[:, 0], "y_m": xyt[:, 1], "heading_rad": xyt[:, 2],
+    })
+
+
+def _apply_frames(raw: np.ndarray, starts, ends, T: np.ndarray) -> np.ndarray:
+    out = raw.copy()
+    for w, (s, e) in enumerate(zip(starts, ends)):
+        out[s:e] = compose_se2(T[w], raw[s:e])
+    return out
+
+
+def _extent(xy: np.ndarray) -> float:
+    """RMS distance (m) of positions from their centroid."""
+    return float(np.sqrt(np.mean(np.sum((xy - xy.mean(axis=0)) ** 2, axis=1)))) if len(xy) else 0.0
+
+
+def _inject_false_pairs(cand: pd.DataFrame, frac: float, n_nodes: int, walk: np.ndarray,
+                        fp_nodes: np.ndarray, seed: int) -> pd.DataFrame:
+    """Test hook: replace a fraction of candidate pairs by random cross-walk pairs of scanned nodes."""
+    rng = np.random.default_rng(seed + 7919)
+    n_bad = int(round(frac * len(cand)))
+    if n_bad == 0:
+        cand["injected"] = False
+        return cand
+    drop = rng.choice(len(cand), n_bad, replace=False)
+    keep = cand.drop(index=cand.index[drop]).copy()
+    keep["injected"] = False
+    a = rng.choice(fp_nodes, 4 * n_bad)
+    b = rng.choice(fp_nodes, 4 * n_bad)
+    ok = walk[a] != walk[b]
+    a, b = a[ok][:n_bad], b[ok][:n_bad]
+    fake = pd.DataFrame({"node_k": np.minimum(a, b), "node_q": np.maximum(a, b), "rss_dist": np.nan,
+                         "common": 0, "kind": "cross", "injected": True})
+    return pd.concat([keep, fake], ignore_index=True)
+
+
+# ----------------------------------------------------------------------------------------------- solve
+def _levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progress: Progress, outer: int,
+                         ordering: str):
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(cfg.solve.max_iterations)
+    params.setRelativeErrorTol(cfg.solve.relative_error_tol)
+    params.setAbsoluteErrorTol(cfg.solve.absolute_error_tol)
+    params.setOrderingType(ordering)
+
+    def hook(it, before, after):
+        history.append(float(after))
+        if progress:
+            progress("solve", {"outer": outer, "iteration": int(it), "cost_before": float(before),
+                               "cost_after": float(after), "max_iterations": cfg.solve.max_iterations})
+
+    params.iterationHook = hook
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    result = opt.optimize()
+    return result, int(opt.iterations())
+
+
+def optimize(
+    dataset: Dataset,
+    fingerprints: Fingerprints,
+    cfg: OptimizeConfig,
+    anchors: pd.DataFrame | None = None,
+    progress: Progress = None,
+) -> OptimizeResult:
+    """Align all walks of ``dataset`` into one frame and optimise the pose graph (see module docstring).
+
+    Raises :class:`InputError` for no poses, no fingerprints, NaN in poses, a single-step walk (when
+    ``cfg.single_step_walks == "error"``) and anchors outside their walk's time span or of unknown walks.
+    Walks with no verified link to the reference walk are reported (``walks.linked``, warnings).
+    """
+    t_all = time.perf_counter()
+    timing: dict[str, float] = {}
+    keep_walk, warnings = _check_inputs(dataset, fingerprints, cfg)
+    poses = dataset.poses
+    n = len(poses)
+    walk_ids = [str(w) for w in dataset.walks["walk_id"]]
+    slices = dataset.walk_slices()
+    slices = {str(k): v for k, v in slices.items()}
+    n_walks = len(walk_ids)
+    starts = np.array([slices[w].start if w in slices else 0 for w in walk_ids])
+    ends = np.array([slices[w].stop if w in slices else 0 for w in walk_ids])
+    walk_of = dataset.walk_index()
+    raw = poses[["x_m", "y_m", "heading_rad"]].to_numpy(float)
+    step_len = np.r_[0.0, np.hypot(np.diff(raw[:, 0]), np.diff(raw[:, 1]))]
+    step_len[starts[starts < n]] = 0.0
+    path = np.cumsum(step_len)
+    path -= np.repeat(path[starts], ends - starts)  # per-walk walked distance
+    paper = cfg.pipeline == "paper"
+    active = keep_walk[walk_of]
+
+    # ------------------------------------------------------------------ pair search
+    t0 = time.perf_counter()
+    fp = fingerprints.subset(active[fingerprints.node])
+    rm = RssMatrix.from_fingerprints(fp, cfg.pairs.fill_dbm)
+    meta = RowMeta(fp.node, walk_of[fp.node], poses["step"].to_numpy()[fp.node],
+                   poses["t_s"].to_numpy(float)[fp.node], path[fp.node])
+    if paper:
+        cand, _ = median_window_pairs(rm, meta, cfg.pairs, progress)
+    else:
+        cand = run_matched_candidates(rm, meta, cfg.pairs, progress)
+    cand["node_k"] = fp.node[cand["row_k"].to_numpy()]
+    cand["node_q"] = fp.node[cand["row_q"].to_numpy()]
+    cand = cand.drop(columns=["row_k", "row_q"])
+    cand = _inject_false_pairs(cand, cfg.inject_false_pairs, n, walk_of, fp.node, cfg.init.seed)
+    cand = cand.reset_index(drop=True)
+    timing["pair_search"] = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ initialisation
+    t0 = time.perf_counter()
+    abs_rot, abs_known, abs_sig = walk_abs_rotation(poses, starts, ends, cfg.init)
+    abs_known &= keep_walk
+    ref_idx = None
+    if cfg.reference_walk:
+        if cfg.reference_walk not in walk_ids:
+            raise InputError(f"reference_walk {cfg.reference_walk!r} is not a walk of this dataset")
+        ref_idx = walk_ids.index(cfg.reference_walk)
+    nk_all, nq_all = cand["node_k"].to_numpy(), cand["node_q"].to_numpy()
+    cross = walk_of[nk_all] != walk_of[nq_all]
+    if cfg.init.method == "ransac":
+        init = initialise(raw, path, walk_of, n_walks, cand[cross].reset_index(drop=True), abs_rot, abs_known,
+                          abs_sig, cfg.init, ref_idx)
+    else:
+        init = _origin_init(cand[cross], walk_of, n_walks, ref_idx)
+    T = init.world_T_walk.copy()
+    if progress:
+        progress("init", {"linked": int(init.linked.sum()), "walks": n_walks})
+
+    anchor_nodes = np.zeros(0, np.int64)
+    if anchors is not None and len(anchors):
+        anchor_nodes = _anchor_nodes(anchors, poses, slices)
+    init_xyt = _apply_frames(raw, starts, ends, T)
+    gauge_full, gauge_rot_only = _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init, T,
+                                                     raw, starts, ends)
+    init_xyt = _apply_frames(raw, starts, ends, T)
+    timing["init"] = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ vicinity pairs to use
+    t0 = time.perf_counter()
+    comp_of_node = init.component[walk_of]
+    same_comp = comp_of_node[nk_all] == comp_of_node[nq_all]
+    d_init = np.hypot(*(init_xyt[nk_all, :2] - init_xyt[nq_all, :2]).T)
+    if paper:
+        pool = np.ones(len(cand), bool)
+        first = pool.copy()
+    else:
+        # pool: cross pairs inside one linked component (re-admitted by the outer loop when the solve
+        # brings them within d_max) and within-walk pairs consistent with the walk's own PDR geometry
+        pool = cross & same_comp
+        first = pool & (d_init < cfg.init.ransac_gate_m)
+        if cfg.pairs.within_walk:
+            d_raw = np.hypot(*(raw[nk_all, :2] - raw[nq_all, :2]).T)
+            gate = cfg.pairs.within_gate_m + cfg.pairs.within_drift_per_m * np.abs(path[nk_all] - path[nq_all])
+            ok_within = ~cross & (d_raw < gate)
+            pool |= ok_within
+            first |= ok_within
+    cand["init_dist_m"] = d_init
+    pool_idx = np.flatnonzero(pool)
+    pk, pq = nk_all[pool_idx], nq_all[pool_idx]
+
+    # ------------------------------------------------------------------ static factors
+    static = gtsam.NonlinearFactorGraph()
+    n_odo = add_odometry(static, raw, starts[keep_walk], ends[keep_walk], cfg.odometry)
+    n_prior = 0
+    ref = init.reference
+    every = cfg.solve.heading_prior_every_n
+    heading_priors = (not paper and every > 0 and bool(init.heading_known[init.reference]))
+    for r in gauge_full:
+        s = starts[r]
+        if heading_priors and init.component[r] == 0 and init.heading_known[r]:
+            # the magnetometer priors fix the map's rotation; pin only the reference position
+            static.add(gtsam.PoseTranslationPrior2D(X(s), gtsam.Pose2(*init_xyt[s]),
+                                                    gtsam.noiseModel.Isotropic.Sigma(2, cfg.solve.gauge_sigma_m)))
+            n_prior += 1
+            continue
+        static.add(gtsam.PriorFactorPose2(X(s), gtsam.Pose2(*init_xyt[s]), gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([cfg.solve.gauge_sigma_m, cfg.solve.gauge_sigma_m, cfg.solve.gauge_sigma_rad]))))
+        n_prior += 1
+    for r in gauge_rot_only:
+        s = starts[r]
+        static.add(gtsam.PoseRotationPrior2D(X(s), gtsam.Pose2(*init_xyt[s]),
+                                             gtsam.noiseModel.Isotropic.Sigma(1, cfg.solve.gauge_sigma_rad)))
+        n_prior += 1
+    for w in np.flatnonzero(~keep_walk):  # skipped walks: pinned where they are
+        for i in range(starts[w], ends[w]):
+            static.add(gtsam.PriorFactorPose2(X(i), gtsam.Pose2(*init_xyt[i]),
+                                              gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
+            n_prior += 1
+    n_anchor = 0
+    for i, node in enumerate(anchor_nodes):
+        static.add(gtsam.PoseTranslationPrior2D(
+            X(node), gtsam.Pose2(float(anchors["x_m"].iloc[i]), float(anchors["y_m"].iloc[i]), 0.0),
+            gtsam.noiseModel.Isotropic.Sigma(2, cfg.solve.anchor_sigma_m)))
+        n_anchor += 1
+    n_heading = 0
+    if heading_priors:
+        yaw = poses["yaw_abs_rad"].to_numpy(float)
+        ysig = yaw_sigma(poses, cfg.init) * cfg.solve.heading_prior_sigma_scale
+        world_rot = init.abs_rot[ref]
+        if len(anchor_nodes):
+            world_rot = init.abs_rot[ref] - _frame_rotation_from(T, init, ref)
+        for w in np.flatnonzero(init.heading_known):
+            idx = np.arange(starts[w], ends[w], every)
+            idx = idx[np.isfinite(yaw[idx])]
+            if not len(idx):
+                continue
+            # prior heading of pose i in the common frame: its yaw_abs minus the reference frame's rotation
+            for i in idx:
+                noise = gtsam.noiseModel.Isotropic.Sigma(1, float(ysig[i]))
+                static.add(gtsam.PoseRotationPrior2D(X(int(i)), gtsam.Pose2(0, 0, yaw[i] - world_rot), noise))
+                n_heading += 1
+    timing["build"] = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ joint solve, outer loop
+    t0 = time.perf_counter()
+    vnoise = vicinity_noise(cfg.vicinity) if cfg.vicinity.kernel != "custom_factor" else None
+    values = poses_to_values(init_xyt)
+    # gtsam 4.3's METIS ordering corrupts memory on graphs with isolated variables (a skipped one-pose
+    # walk) and gains nothing on small graphs: COLAMD there
+    ordering = cfg.solve.ordering
+    if (~keep_walk).any() or n < cfg.solve.metis_min_poses:
+        ordering = "COLAMD"
+    cost_history: list[float] = []
+    current = init_xyt
+    active_pairs = first[pool_idx]
+    iterations = 0
+    initial_cost = None
+    n_vic_used = 0
+    outer_done = 0
+    for outer in range(cfg.solve.outer_iterations):
+        graph = gtsam.NonlinearFactorGraph(static)
+        sel = np.flatnonzero(active_pairs)
+        for k, q in zip(pk[sel].tolist(), pq[sel].tolist()):
+            graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
+        if initial_cost is None:
+            initial_cost = float(graph.error(values))
+            cost_history.append(initial_cost)
+        values, it = _levenberg_marquardt(graph, values, cfg, cost_history, progress, outer, ordering)
+        iterations += it
+        outer_done += 1
+        n_vic_used = len(sel)
+        current = values_to_poses(values, n)
+        d_now = np.hypot(*(current[pk, :2] - current[pq, :2]).T)
+        new_active = d_now < cfg.vicinity.d_max
+        if paper or np.array_equal(new_active, active_pairs) or outer == cfg.solve.outer_iterations - 1:
+            break
+        active_pairs = new_active
+    # the last solve's pairs are "the vicinity factors finally used"
+    use = np.zeros(len(cand), bool)
+    use[pool_idx[active_pairs]] = True
+    cand["used"] = use
+    pk, pq = nk_all[use], nq_all[use]
+    final_graph = gtsam.NonlinearFactorGraph(static)
+    for k, q in zip(pk.tolist(), pq.tolist()):
+        final_graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
+    final_cost = float(final_graph.error(values))
+    init_cost_all = float(final_graph.error(poses_to_values(init_xyt)))
+    timing["solve"] = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ checks
+    t0 = time.perf_counter()
+    sig = np.array([cfg.odometry.sigma_x_m, cfg.odometry.sigma_y_m, 1 / math.sqrt(cfg.odometry.mu)])
+    odo_res = []
+    extent_ratio = np.full(n_walks, np.nan)
+    for w in np.flatnonzero(keep_walk):
+        s, e = starts[w], ends[w]
+        du = relative_se2(current[s:e]) - relative_se2(raw[s:e])
+        du[:, 2] = np.angle(np.exp(1j * du[:, 2]))
+        odo_res.append(du / sig)
+        er = _extent(raw[s:e, :2])
+        extent_ratio[w] = _extent(current[s:e, :2]) / er if er > 0 else 1.0
+    odo_rms = float(np.sqrt(np.mean(np.concatenate(odo_res) ** 2))) if odo_res else 0.0
+    rejected = False
+    if odo_rms > cfg.solve.max_odometry_rms_sigma:
+        warnings.append(f"solution rejected: odometry residual RMS {odo_rms:.1f} sigma > "
+                        f"{cfg.solve.max_odometry_rms_sigma}; initial poses returned")
+        rejected = True
+    shrunk = np.flatnonzero(extent_ratio < cfg.solve.min_extent_ratio)
+    for w in shrunk:
+        warnings.append(f"walk {walk_ids[w]} shrank to {extent_ratio[w]:.2f} of its raw PDR extent (folded?)")
+    if np.nanmedian(extent_ratio) < cfg.solve.min_extent_ratio and not rejected:
+        warnings.append("solution rejected: the map shrank (median walk extent ratio "
+                        f"{np.nanmedian(extent_ratio):.2f}); initial poses returned")
+        rejected = True
+    if rejected:
+        current = init_xyt.copy()
+    timing["checks"] = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ report tables
+    final_d = np.hypot(*(current[pk, :2] - current[pq, :2]).T)
+    e_fin = cfg.vicinity.e_max * np.clip((final_d - cfg.vicinity.d_min) / (cfg.vicinity.d_max - cfg.vicinity.d_min),
+                                         0, 1)
+    used = cand[use].reset_index(drop=True)
+    pairs = pd.DataFrame({
+        "node_k": pk, "node_q": pq,
+        "walk_k": np.asarray(walk_ids, dtype=object)[walk_of[pk]],
+        "walk_q": np.asarray(walk_ids, dtype=object)[walk_of[pq]],
+        "kind": used["kind"].to_numpy(), "rss_dist": used["rss_dist"].to_numpy(),
+        "common": used["common"].to_numpy(), "init_dist_m": d_init[use], "final_dist_m": final_d,
+        "final_error": e_fin, "in_range": final_d < cfg.vicinity.d_max,
+        "injected": used["injected"].to_numpy(),
+    })
+    walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio, cfg)
+    for w in np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy()):
+        warnings.append(f"walk {walk_ids[w]} is not linked to the reference walk {walk_ids[ref]} "
+                        f"(component {int(init.component[w])}): its placement is not constrained by Wi-Fi")
+    if n_walks > 1 and walks_df["linked"].sum() <= 1:
+        warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
+    for wmsg in warnings:
+        log.warning(wmsg)
+    timing["total"] = time.perf_counter() - t_all
+    n_cross = int((pairs["kind"] == "cross").sum())
+    stats = {
+        "pipeline": cfg.pipeline,
+        "factors": {"odometry": n_odo, "vicinity": int(len(pk)), "vicinity_within": int(len(pk) - n_cross),
+                    "vicinity_cross": n_cross, "vicinity_in_final_solve": int(n_vic_used), "prior": n_prior,
+                    "anchor": n_anchor, "heading": n_heading},
+        "walks": n_walks, "poses": n, "fingerprints": int(len(fp)),
+        "candidates": int(len(cand)), "candidates_cross": int(cross.sum()),
+        "walk_pairs_tested": len(init.fits), "walk_pairs_accepted": int(sum(f.accepted for f in init.fits)),
+        "reference_walk": walk_ids[ref], "linked_walks": int(walks_df["linked"].sum()),
+        "components": int(init.component.max() + 1) if n_walks else 0,
+        "initial_cost": init_cost_all, "final_cost": final_cost, "first_solve_initial_cost": initial_cost,
+        "iterations": iterations, "outer_iterations": outer_done, "ordering": ordering, "cost_history": cost_history,
+        "odometry_residual_rms_sigma": odo_rms, "median_extent_ratio": float(np.nanmedian(extent_ratio)),
+        "rejected": rejected, "time_s": timing, "warnings": warnings,
+    }
+    return OptimizeResult(
+        poses=_poses_df(dataset, current), initial_poses=_poses_df(dataset, init_xyt), pairs=pairs,
+        candidates=cand, walks=walks_df, stats=stats, cost_history=cost_history,
+    )
+
+
+def _frame_rotation_from(T: np.ndarray, init: InitResult, ref: int) -> float:
+    """Rotation (rad) applied to the reference frame by anchor placement (T[ref] after vs before)."""
+    return float(T[ref, 2] - init.world_T_walk[ref, 2])
+
+
+def _origin_init(cand_cross: pd.DataFrame, walk_of: np.ndarray, n_walks: int, ref_idx: int | None) -> InitResult:
+    """Paper: every walk at the origin; components from any cross-walk pair."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    a = walk_of[cand_cross["node_k"].to_numpy()]
+    b = walk_of[cand_cross["node_q"].to_numpy()]
+    A = coo_matrix((np.ones(len(a)), (a, b)), shape=(n_walks, n_walks))
+    _, comp = connected_components(A, directed=False)
+    ref = int(ref_idx) if ref_idx is not None else int(np.argmax(np.bincount(np.r_[a, b], minlength=n_walks)))
+    c = np.where(comp == comp[ref], -1, comp)
+    _, comp = np.unique(c, return_inverse=True)
+    return InitResult(np.zeros((n_walks, 3)), comp, comp == 0, ref, [], np.zeros(n_walks, bool),
+                      np.zeros(n_walks))
+
+
+def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResult, T, raw, starts, ends):
+    """Move each component onto its anchors (SE(2) with >= 2 distinct anchors, translation with 1) by
+    updating T in place; returns (walks needing a full gauge prior, walks needing a rotation prior)."""
+    from rmbuild.evaluate.trajectory import align_se2, rotation_angle_rad
+
+    full, rot_only = [], []
+    n_comp = int(init.component.max()) + 1 if len(init.component) else 0
+    for c in range(n_comp):
+        walks_c = np.flatnonzero(init.component == c)
+        root = init.reference if c == 0 else int(walks_c[0])
+        m = init.component[walk_of[anchor_nodes]] == c if len(anchor_nodes) else np.zeros(0, bool)
+        if m.sum() == 0:
+            full.append(root)
+            continue
+        src = init_xyt[anchor_nodes[m], :2]
+        dst = anchors[["x_m", "y_m"]].to_numpy(float)[m]
+        if m.sum() >= 2 and np.ptp(dst, axis=0).max() > 1.0:
+            R, t = align_se2(src, dst)
+            th = rotation_angle_rad(R)
+        else:
+            th, t = 0.0, (dst - src).mean(axis=0)
+            rot_only.append(root)
+        G = np.array([t[0], t[1], th])
+        for w in walks_c:
+            c_, s_ = np.cos(G[2]), np.sin(G[2])
+            x, y = T[w, 0], T[w, 1]
+            T[w] = (G[0] + c_ * x - s_ * y, G[1] + s_ * x + c_ * y, np.angle(np.exp(1j * (T[w, 2] + G[2]))))
+    return full, rot_only
+
+
+def _walk_table(walk_ids, starts, ends, keep, init: InitResult, T, pairs, walk_of, path, extent_ratio,
+                cfg: OptimizeConfig) -> pd.DataFrame:
+    n_walks = len(walk_ids)
+    n_cross = np.zeros(n_walks, np.int64)
+    n_in = np.zeros(n_walks, np.int64)
+    partners: list[set] = [set() for _ in range(n_walks)]
+    cr = pairs[pairs["kind"] == "cross"]
+    wk = walk_of[cr["node_k"].to_numpy()]
+    wq = walk_of[cr["node_q"].to_numpy()]
+    inr = cr["in_range"].to_numpy()
+    for a, b, ok in zip(wk.tolist(), wq.tolist(), inr.tolist()):
+        n_cross[a] += 1
+        n_cross[b] += 1
+        n_in[a] += ok
+        n_in[b] += ok
+        partners[a].add(b)
+        partners[b].add(a)
+    shared = np.zeros(n_walks)
+    for w in range(n_walks):
+        nodes = np.r_[cr["node_k"].to_numpy()[wk == w], cr["node_q"].to_numpy()[wq == w]]
+        shared[w] = _covered_m(path[nodes]) if len(nodes) else 0.0
+    linked = init.linked & keep
+    frac_in = np.where(n_cross > 0, n_in / np.maximum(n_cross, 1), 0.0)
+    conf = np.where(linked, np.clip(shared / (4 * cfg.init.min_shared_path_m), 0, 1) * frac_in, 0.0)
+    conf[init.reference] = 1.0 if keep[init.reference] else 0.0
+    return pd.DataFrame({
+        "walk_id": walk_ids, "n_poses": ends - starts, "linked": linked,
+        "component": init.component.astype(np.int64), "reference": np.arange(n_walks) == init.reference,
+        "n_cross_pairs": n_cross, "n_partner_walks": [len(p) for p in partners], "shared_path_m": shared,
+        "world_T_walk_x_m": T[:, 0], "world_T_walk_y_m": T[:, 1], "world_T_walk_theta_rad": T[:, 2],
+        "heading_known": init.heading_known, "extent_ratio": extent_ratio, "confidence": conf,
+    })

@@ -1,0 +1,70 @@
+"""RSS distance of seed 001 eq. 9 as matrix products (FINDINGS: the GEMM identity).
+
+With ``a = rss - fill`` (0 for a missing AP) and ``b`` the detection indicator, the sum of squared
+differences over the union of two fingerprints' APs is ``‖a_k − a_q‖²`` and the union's size is
+``n_k + n_q − b_k·b_q``; so ``d(k, q) = sqrt(‖a_k − a_q‖² / |union|)`` for whole blocks at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rmbuild.types import Fingerprints
+
+
+@dataclass
+class RssMatrix:
+    """Fingerprints prepared for eq. 9: ``a`` (n, m) float32 dB above fill, ``b`` (n, m) float32 0/1,
+    ``sq`` (n,) ‖a‖², ``cnt`` (n,) number of APs seen."""
+
+    a: np.ndarray
+    b: np.ndarray
+    sq: np.ndarray
+    cnt: np.ndarray
+
+    @staticmethod
+    def from_fingerprints(fp: Fingerprints, fill_dbm: float) -> RssMatrix:
+        det = ~np.isnan(fp.rss_dbm)
+        a = np.where(det, fp.rss_dbm - np.float32(fill_dbm), 0).astype(np.float32)
+        b = det.astype(np.float32)
+        return RssMatrix(a, b, np.einsum("ij,ij->i", a, a, dtype=np.float64), b.sum(axis=1, dtype=np.float64))
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+    def block(self, rows: np.ndarray | slice, cols: np.ndarray | slice | None = None):
+        """(d, common) for rows x cols: eq. 9 distance (dB, float32) and number of shared APs."""
+        cols = slice(None) if cols is None else cols
+        ar, ac = self.a[rows], self.a[cols]
+        dot = ar @ ac.T
+        common = self.b[rows] @ self.b[cols].T
+        union = self.cnt[rows][:, None] + self.cnt[cols][None, :] - common
+        sq = self.sq[rows][:, None] + self.sq[cols][None, :] - 2.0 * dot
+        d = np.sqrt(np.maximum(sq, 0) / np.maximum(union, 1)).astype(np.float32)
+        return d, common
+
+    def pairs(self, i: np.ndarray, j: np.ndarray, chunk: int = 20000):
+        """(d, common) for row pairs (i[p], j[p]) (exact, chunked)."""
+        d = np.empty(len(i), np.float32)
+        common = np.empty(len(i), np.float32)
+        for s in range(0, len(i), chunk):
+            ii, jj = i[s:s + chunk], j[s:s + chunk]
+            diff = self.a[ii] - self.a[jj]
+            c = np.einsum("ij,ij->i", self.b[ii], self.b[jj])
+            union = self.cnt[ii] + self.cnt[jj] - c
+            d[s:s + chunk] = np.sqrt(np.einsum("ij,ij->i", diff, diff) / np.maximum(union, 1))
+            common[s:s + chunk] = c
+        return d, common
+
+
+def rss_distance_reference(rss_k: np.ndarray, rss_q: np.ndarray, fill_dbm: float = -110.0) -> float:
+    """Eq. 9 literally for two fingerprints (NaN = not seen): union of APs, missing filled with fill_dbm."""
+    seen = ~np.isnan(rss_k) | ~np.isnan(rss_q)
+    m = int(seen.sum())
+    if m == 0:
+        return 0.0
+    a = np.where(np.isnan(rss_k), fill_dbm, rss_k)[seen]
+    b = np.where(np.isnan(rss_q), fill_dbm, rss_q)[seen]
+    return float(np.sqrt(np.sum((a - b) ** 2) / m))

@@ -1,0 +1,108 @@
+"""End to end on the slam package's own small synthetic venue, and bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("gtsam")
+
+from rmbuild.config.optimize import OptimizeConfig, paper_config  # noqa: E402
+from rmbuild.errors import InputError  # noqa: E402
+from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
+from rmbuild.slam import optimize  # noqa: E402
+from rmbuild.slam.testing import make_venue  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def venue():
+    return make_venue(n_walks=5, steps_per_walk=260, seed=3)
+
+
+@pytest.fixture(scope="module")
+def result(venue):
+    ds, fp = venue
+    calls = []
+    r = optimize(ds, fp, OptimizeConfig(), progress=lambda ph, info: calls.append(ph))
+    return r, calls
+
+
+def test_end_to_end_recovers_alignment(venue, result):
+    ds, _ = venue
+    r, calls = result
+    raw = trajectory_metrics(ds.poses, ds)
+    opt = trajectory_metrics(r.poses, ds)
+    assert raw["landmark_error_m"]["mean"] > 10
+    assert opt["landmark_error_m"]["mean"] < 2.0
+    assert opt["heading_alignment_error_deg"]["mean"] < 2.0
+    assert r.walks["linked"].all() and not r.stats["rejected"]
+    assert {"pair_search", "solve"} <= set(calls)
+    assert list(r.poses.columns) == ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
+    assert len(r.poses) == len(ds.poses) == len(r.initial_poses)
+    assert r.stats["factors"]["odometry"] == len(ds.poses) - len(ds.walks)
+    assert r.stats["final_cost"] <= r.stats["initial_cost"] + 1e-9
+    assert set(r.pairs["kind"]) <= {"within", "cross"}
+    for k in ("pair_search", "init", "build", "solve"):
+        assert k in r.stats["time_s"]
+
+
+def test_paper_preset_runs(venue):
+    ds, fp = venue
+    small = ds.poses["step"] < 80
+    ds2 = dataclasses.replace(ds, poses=ds.poses[small].reset_index(drop=True),
+                              truth_poses=ds.truth_poses[small].reset_index(drop=True))
+    keep = np.isin(fp.node, np.flatnonzero(small))
+    # node ids change: rebuild fingerprints of the first 80 steps of each walk
+    old_to_new = -np.ones(len(ds.poses), np.int64)
+    old_to_new[np.flatnonzero(small)] = np.arange(small.sum())
+    fp2 = fp.subset(keep)
+    fp2.node = old_to_new[fp2.node]
+    r = optimize(ds2, fp2, paper_config())
+    assert r.stats["pipeline"] == "paper" and r.stats["factors"]["vicinity"] > 0
+
+
+def test_anchors_put_map_in_building_frame(venue):
+    ds, fp = venue
+    fx = ds.fixes.groupby("walk_id").head(2).reset_index(drop=True)
+    anchors = fx[["walk_id", "t_s", "x_m", "y_m"]]
+    r = optimize(ds, fp, OptimizeConfig(), anchors=anchors)
+    m = trajectory_metrics(r.poses, ds, align=False)
+    assert m["landmark_error_m"]["mean"] < 3.0
+
+
+def test_bad_inputs(venue):
+    ds, fp = venue
+    cfg = OptimizeConfig()
+    with pytest.raises(InputError, match="no poses"):
+        optimize(dataclasses.replace(ds, poses=ds.poses.iloc[:0]), fp, cfg)
+    with pytest.raises(InputError, match="fingerprints"):
+        optimize(ds, fp.subset(np.zeros(len(fp), bool)), cfg)
+    bad = ds.poses.copy()
+    bad.loc[5, "x_m"] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        optimize(dataclasses.replace(ds, poses=bad), fp, cfg)
+    anchors = pd.DataFrame({"walk_id": ["w000"], "t_s": [1e9], "x_m": [0.0], "y_m": [0.0]})
+    with pytest.raises(InputError, match="outside"):
+        optimize(ds, fp, cfg, anchors=anchors)
+
+
+def test_single_step_walk_and_disconnected(venue):
+    ds, fp = venue
+    # keep walk w000 whole, reduce w001 to one step; drop every other walk
+    p = ds.poses
+    keep = (p["walk_id"] == "w000") | ((p["walk_id"] == "w001") & (p["step"] == 0))
+    idx = np.flatnonzero(keep)
+    remap = -np.ones(len(p), np.int64)
+    remap[idx] = np.arange(len(idx))
+    fp2 = fp.subset(np.isin(fp.node, idx))
+    fp2.node = remap[fp2.node]
+    ds2 = dataclasses.replace(ds, walks=ds.walks.iloc[:2].reset_index(drop=True),
+                              poses=p[keep].reset_index(drop=True), truth_poses=None)
+    with pytest.raises(InputError, match="at least 2 steps"):
+        optimize(ds2, fp2, dataclasses.replace(OptimizeConfig(), single_step_walks="error"))
+    r = optimize(ds2, fp2, OptimizeConfig())
+    assert any("skipped" in w for w in r.stats["warnings"])
+    assert any("disconnected" in w for w in r.stats["warnings"])
