@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, start, workspace_option
+from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.view import rerun_option
 
 
 @click.command()
@@ -13,8 +14,9 @@ from rmbuild.cli.options import common_options, start, workspace_option
               help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
 @click.option("--localizer", "localizers", multiple=True,
               help="Localizer(s) to run side by side (repeatable; default from config: knn, wknn).")
+@rerun_option
 @common_options
-def evaluate(workspace, test_walks, localizers, config_path, force, quiet, verbose):
+def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):
     """Localize held-out walks with maps built from optimised, true and raw positions; report errors."""
     start(verbose, quiet)
     from pathlib import Path
@@ -29,8 +31,8 @@ def evaluate(workspace, test_walks, localizers, config_path, force, quiet, verbo
     # the maps are rasterised like export-map did, unless a config file says otherwise
     map_cfg = load_stage_config("map", config_path if config_path else (map_toml if map_toml.is_file() else None))
     walks = [w.strip() for w in test_walks.split(",") if w.strip()] if test_walks else None
-    with progress_display(quiet) as progress:
-        report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress)
+    with stage_viewer(rerun, workspace, "evaluate", quiet) as viewer, progress_display(quiet) as progress:
+        report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer)
     if not quiet:
         click.echo(table)
         click.echo(f"report: {workspace}/reports/evaluate.json, CDF plot: {workspace}/evaluate/cdf.png")

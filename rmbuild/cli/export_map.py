@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, start, workspace_option
+from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.view import rerun_option
 
 
 @click.command("export-map")
@@ -12,8 +13,9 @@ from rmbuild.cli.options import common_options, start, workspace_option
 @click.option("--anchors", "anchors_path", type=click.Path(dir_okay=False), default=None,
               help="CSV/Parquet with walk_id, t_s, x_m, y_m: place the map in the building frame (SE(2) fit).")
 @click.option("--cell-size", "cell_size_m", type=float, default=None, help="Grid cell edge in metres.")
+@rerun_option
 @common_options
-def export_map(workspace, anchors_path, cell_size_m, config_path, force, quiet, verbose):
+def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, quiet, verbose):
     """Rasterise the optimised fingerprints of WORKSPACE into a radio map (WORKSPACE/map/)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -21,8 +23,8 @@ def export_map(workspace, anchors_path, cell_size_m, config_path, force, quiet, 
     from rmbuild.stages import export_map as stage
 
     cfg = load_stage_config("map", config_path, overrides={"cell_size_m": cell_size_m})
-    with progress_display(quiet) as progress:
-        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress)
+    with stage_viewer(rerun, workspace, "map", quiet) as viewer, progress_display(quiet) as progress:
+        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer)
     if not quiet:
         click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
                    f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {workspace}/map/")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, start, workspace_option
+from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.view import rerun_option
 
 
 @click.command()
@@ -12,8 +13,9 @@ from rmbuild.cli.options import common_options, start, workspace_option
 @workspace_option
 @click.option("--format", "fmt", default=None,
               help="Input format (default: recognised from the files). Formats: rmbuild, msft-ilc, ipin.")
+@rerun_option
 @common_options
-def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
+def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
     """Read INPUTS (files or directories), validate them and create the workspace."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -22,8 +24,9 @@ def ingest(inputs, workspace, fmt, config_path, force, quiet, verbose):
 
     cfg = load_stage_config("ingest", config_path)
     pdr_cfg = load_stage_config("pdr", config_path)
-    with progress_display(quiet) as progress:
-        s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg)
+    with stage_viewer(rerun, workspace, "ingest", quiet) as viewer, progress_display(quiet) as progress:
+        s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg,
+                      viewer=viewer)
     if not quiet:
         skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
         click.echo(

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, start, workspace_option
+from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.view import rerun_option
 
 
 @click.command()
@@ -13,8 +14,9 @@ from rmbuild.cli.options import common_options, start, workspace_option
               help="CSV/Parquet with walk_id, t_s, x_m, y_m: known building-frame positions (position priors).")
 @click.option("--preset", type=click.Choice(["rmbuild", "paper"]), default=None,
               help="Start from rmbuild's defaults or from seed 001's model as published (before --config).")
+@rerun_option
 @common_options
-def optimize(workspace, anchors_path, preset, config_path, force, quiet, verbose):
+def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, verbose):
     """Align all walks of WORKSPACE into one frame (GTSAM: odometry + fuzzy RSS-vicinity factors)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -28,8 +30,8 @@ def optimize(workspace, anchors_path, preset, config_path, force, quiet, verbose
 
         base = paper_config()
     cfg = load_stage_config("optimize", config_path, base=base)
-    with progress_display(quiet) as progress:
-        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress)
+    with stage_viewer(rerun, workspace, "optimize", quiet) as viewer, progress_display(quiet) as progress:
+        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer)
     if quiet:
         return
     f = r["factors"]

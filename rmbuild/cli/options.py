@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import click
@@ -30,3 +31,22 @@ workspace_option = click.option(
     "-w", "--workspace", required=True, type=click.Path(file_okay=False),
     help="Workspace directory (created by `rmbuild ingest`).",
 )
+
+
+@contextmanager
+def stage_viewer(rerun: str | None, workspace: str, stage: str, quiet: bool = False) -> Iterator[Any]:
+    """The rerun viewer of a stage's ``--rerun`` value (a do-nothing viewer when absent); closed on exit."""
+    from rmbuild.cli.view import rerun_target
+    from rmbuild.viz import open_viewer
+
+    target = rerun_target(rerun, workspace, stage)
+    viewer = open_viewer(target, recording_name=f"rmbuild {stage}") if target is not None else None
+    ok = False
+    try:
+        yield viewer
+        ok = True
+    finally:
+        if viewer is not None:
+            path = viewer.close(keep=ok)
+            if path is not None and not quiet:
+                click.echo(f"rerun recording: {path}")

@@ -65,5 +65,7 @@ def run(
         w.config(to_toml(cfg, "evaluate") + "\n" + to_toml(map_cfg, "map"))
         w.report = report
     if viewer is not None:
-        viewer.log_tracks(tracks)
+        from rmbuild.stages.view import log_workspace
+
+        log_workspace(ws, viewer)
     return report, res.table()

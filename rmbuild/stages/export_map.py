@@ -70,5 +70,7 @@ def run(
         }
         w.report = report
     if viewer is not None:
-        viewer.log_radiomap(rm.long_table(), cfg.cell_size_m, rm.origin_xy)
+        from rmbuild.stages.view import log_workspace
+
+        log_workspace(ws, viewer)
     return report

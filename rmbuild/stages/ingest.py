@@ -23,6 +23,7 @@ def run(
     force: bool = False,
     progress: Progress | None = None,
     pdr_cfg: PdrConfig | None = None,
+    viewer=None,
 ) -> dict:
     """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report.
 
@@ -49,4 +50,8 @@ def run(
         w.report = summary
     for msg in summary["warnings"]:
         log.warning(msg)
+    if viewer is not None:
+        from rmbuild.stages.view import log_workspace
+
+        log_workspace(Workspace.open(workspace), viewer)
     return summary

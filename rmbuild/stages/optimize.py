@@ -39,6 +39,7 @@ def run(
     cfg: OptimizeConfig,
     anchors_path: str | Path | None = None,
     progress: Progress | None = None,
+    viewer=None,
 ) -> dict:
     """Run the SLAM back end on the workspace's walks; returns the optimize report."""
     from rmbuild.slam import optimize
@@ -55,6 +56,9 @@ def run(
         if phase != state["phase"]:
             state["phase"] = phase
             progress.phase(phase, info.get("total"))
+        if phase == "solve" and "cost_after" in info and viewer is not None:
+            state["iter"] = state.get("iter", 0) + 1
+            viewer.log_cost(state["iter"], float(info["cost_after"]))
         if phase == "solve" and "cost_after" in info:
             progress.message(f"outer {info.get('outer')} iteration {info.get('iteration')}: "
                              f"cost {info['cost_after']:.4g}")
@@ -97,6 +101,10 @@ def run(
         w.config(to_toml(cfg, "optimize"))
         report["time_s"]["stage_total"] = round(time.perf_counter() - t0, 3)
         w.report = report
+    if viewer is not None:
+        from rmbuild.stages.view import log_workspace
+
+        log_workspace(ws, viewer)
     return report
 
 

@@ -1,0 +1,110 @@
+"""End to end through the real CLI on the tiny venue: every stage, its outputs, reports and bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from cli_util import run_cli
+from conftest import make_input_tables, write_tables
+
+from rmbuild.io.workspace import Workspace
+
+
+@pytest.fixture(scope="module")
+def tiny_ws(tmp_path_factory) -> Path:
+    base = tmp_path_factory.mktemp("pipe")
+    from rmbuild.cli import main
+
+    for args in (["simulate", base / "in", "--preset", "tiny", "--seed", "5", "-q"],
+                 ["ingest", base / "in", "-w", base / "ws", "-q"],
+                 ["optimize", "-w", base / "ws", "-q", "--rerun", base / "opt.rrd"],
+                 ["export-map", "-w", base / "ws", "-q"],
+                 ["evaluate", "-w", base / "ws", "-q"]):
+        with pytest.raises(SystemExit) as e:
+            main([str(a) for a in args])
+        assert e.value.code == 0, args
+    return base
+
+
+def test_every_stage_wrote_its_outputs(tiny_ws: Path) -> None:
+    ws = Workspace.open(tiny_ws / "ws")
+    for stage in ("ingest", "optimize", "map", "evaluate"):
+        assert ws.has(stage) and ws.report_path(stage).exists(), stage
+    opt = json.loads(ws.report_path("optimize").read_text())
+    assert set(opt) >= {"factors", "walks", "poses", "time_s", "raw", "optimized"}
+    assert set(opt["factors"]) >= {"odometry", "vicinity", "prior"}
+    for part in ("raw", "optimized"):
+        assert set(opt[part]) == {"ate_m", "landmark_error_m", "heading_alignment_error_deg"}
+    # the optimised walks are far better placed than the raw ones on the synthetic venue
+    assert opt["optimized"]["ate_m"]["rmse"] < 0.2 * opt["raw"]["ate_m"]["rmse"]
+    tum = sorted((tiny_ws / "ws" / "optimize" / "tum").glob("*.txt"))
+    assert len(tum) == opt["walks"] and len(tum[0].read_text().splitlines()[0].split()) == 8
+    assert (tiny_ws / "opt.rrd").stat().st_size > 0
+
+
+def test_map_outputs(tiny_ws: Path) -> None:
+    ws = Workspace.open(tiny_ws / "ws")
+    cells = ws.read_table("map.cells")
+    assert len(cells) > 0 and (cells["count"] >= 1).all()
+    wide = pd.read_csv(ws.path("map.wide_csv"))
+    assert "LONGITUDE" in wide.columns and "LATITUDE" in wide.columns
+    waps = [c for c in wide.columns if c.startswith("WAP")]
+    assert waps and ((wide[waps] == 100) | (wide[waps] <= 0)).all().all()
+    side = ws.read_json("map.sidecar")
+    assert side["frame"].startswith("walk:") and side["grid"]["cell_size_m"] == 2.0
+    for key in ("map.coverage_png", "map.heatmaps_png"):
+        assert ws.path(key).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_evaluate_report_shape(tiny_ws: Path) -> None:
+    ws = Workspace.open(tiny_ws / "ws")
+    rep = json.loads(ws.report_path("evaluate").read_text())
+    assert rep["gauge"] == "se2" and rep["test_walks"]
+    assert set(rep["maps"]) == {"built", "surveyed", "raw"}
+    keys = {"mean", "median", "p75", "p90", "rmse", "max", "p_lt_5m", "p_lt_10m", "n"}
+    for m in rep["maps"].values():
+        for s in m.values():
+            assert set(s) >= keys
+    # on the tiny venue the built map localizes better than raw walks and near the surveyed map
+    built, raw, surveyed = (rep["maps"][m]["knn"]["median"] for m in ("built", "raw", "surveyed"))
+    assert built < 0.8 * raw and built < 1.5 * surveyed, (built, raw, surveyed)
+    assert ws.path("evaluate.cdf_png").exists()
+
+
+def test_stage_order_is_enforced(tmp_path: Path, capsys) -> None:
+    write_tables(make_input_tables(), tmp_path / "in")
+    assert run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws", "-q").code == 0
+    for cmd in ("export-map", "evaluate"):
+        r = run_cli(capsys, cmd, "-w", tmp_path / "ws")
+        assert r.code == 2 and "run `rmbuild optimize" in r.err, r.err
+    assert not (tmp_path / "ws" / "map").exists()
+
+
+def test_bad_cell_size_writes_nothing(tiny_ws: Path, capsys) -> None:
+    before = sorted(p.name for p in (tiny_ws / "ws" / "map").iterdir())
+    r = run_cli(capsys, "export-map", "-w", tiny_ws / "ws", "--cell-size", "0")
+    assert r.code == 2 and "cell_size_m" in r.err and len(r.err.strip().splitlines()) == 1
+    assert sorted(p.name for p in (tiny_ws / "ws" / "map").iterdir()) == before
+
+
+def test_unknown_localizer_and_test_walk(tiny_ws: Path, capsys) -> None:
+    r = run_cli(capsys, "evaluate", "-w", tiny_ws / "ws", "--localizer", "magic")
+    assert r.code == 2 and "magic" in r.err
+    r = run_cli(capsys, "evaluate", "-w", tiny_ws / "ws", "--test-walks", "nope")
+    assert r.code == 2 and "unknown walk 'nope'" in r.err
+
+
+def test_evaluate_without_ground_truth(tmp_path: Path, capsys) -> None:
+    tables = make_input_tables(n_walks=3, n_steps=60)
+    tables.pop("fixes")
+    write_tables(tables, tmp_path / "in")
+    for args in (["ingest", tmp_path / "in", "-w", tmp_path / "ws", "-q"], ["optimize", "-w", tmp_path / "ws", "-q"]):
+        assert run_cli(capsys, *args).code == 0
+    r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws")
+    assert r.code == 0, r.err
+    assert "not computed" in r.out
+    rep = json.loads((tmp_path / "ws" / "reports" / "evaluate.json").read_text())
+    assert rep["maps"] == {} and "errors" in rep["unavailable"]
