@@ -59,6 +59,9 @@ class PairConfig:
     # path walked between the two nodes.
     within_gate_m: float = 3.0
     within_drift_per_m: float = 0.02
+    # candidates per segment are its best match in each of the top_k closest *walks* (one per walk), so
+    # a node's candidates spread over many walks instead of piling onto one look-alike walk.
+    per_walk: bool = True
     # fingerprint rows per block of the blocked matrix-product search (memory ~ block * n * 4 bytes).
     block_rows: int = 2048
 
@@ -94,9 +97,11 @@ class VicinityConfig:
 
 @dataclass(frozen=True)
 class InitConfig:
-    # "ransac": walk-level SE(2) (or translation-only with known heading) RANSAC from cross-walk pairs,
-    # chained and refined on a walk-level pose graph; "origin": every walk at (0, 0, 0) (paper).
-    method: Literal["ransac", "origin"] = "ransac"
+    # "grow": walks placed one round at a time against the map built so far (walk-to-map RANSAC, which
+    # pools the evidence of every placed walk a short walk crosses), each round followed by a robust
+    # walk-level refinement (rmbuild/slam/grow.py); "ransac": walk-pair RANSAC chained over a spanning tree
+    # of walk pairs (needs long shared stretches per pair); "origin": every walk at (0, 0, 0) (paper).
+    method: Literal["grow", "ransac", "origin"] = "grow"
     # use yaw_abs_rad (magnetometer heading) when present: per-walk frame rotation and heading prior.
     use_abs_heading: bool = True
     # rad; floor of the 1-sigma of a walk's frame rotation from its yaw_abs (the circular mean over its
@@ -121,8 +126,44 @@ class InitConfig:
     # rad; when the heading is known, re-fit the rotation from the inliers only if the shared path is long
     # enough (m) to observe it; otherwise keep the magnetometer rotation.
     refit_rotation_min_path_m: float = 20.0
+    # --- method "grow" ---
+    # m; a pair is an inlier of a walk-to-map hypothesis when it puts its two nodes within this distance
+    # (Wi-Fi's resolution plus the magnetometer's rotation error over a short walk).
+    grow_gate_m: float = 4.0
+    # a walk is placed with at least this many distinct inlier nodes of its own (translation-only fit /
+    # SE(2) fit), this much shared path (m; SE(2) needs refit_rotation_min_path_m), and an inlier count at
+    # least grow_margin times that of the best hypothesis placing it elsewhere (> 2 gates away).
+    grow_min_inliers: int = 3
+    grow_min_inliers_se2: int = 6
+    grow_min_shared_m: float = 6.0
+    grow_margin: float = 1.5
+    # rounds of placement (each round: fit every unplaced walk to the map, place all accepted, refine).
+    grow_max_rounds: int = 100
+    # evidence a walk is fitted with: "knn" (each scan localised on the placed map by its grow_knn_k
+    # nearest placed scans in RSS distance, covered when the nearest is below grow_cover_factor x its
+    # own walk's window median d_med; a walk needs grow_min_inlier_frac of its covered scans as inliers)
+    # or "pairs" (the candidate pairs of the search, counted per distinct scan, with grow_margin).
+    grow_evidence: Literal["knn", "pairs"] = "knn"
+    grow_knn_k: int = 3
+    grow_cover_factor: float = 1.0
+    grow_min_inlier_frac: float = 0.5
+    # walk-level refinement: m, 1-sigma of a pair's position difference; Cauchy scale in sigmas; Gauss-
+    # Newton iterations; pairs within refine_gate_factor * grow_gate_m of each other are used.
+    pair_sigma_m: float = 3.0
+    robust_c: float = 2.0
+    refine_iterations: int = 8
+    refine_gate_factor: float = 1.5
+    # sigmas; a placed walk whose refined rotation is further than this from its magnetometer rotation
+    # has an unreliable magnetometer: its heading priors are dropped.
+    heading_outlier_sigmas: float = 4.0
 
     def validate(self) -> None:
+        if self.grow_gate_m <= 0 or self.grow_min_inliers < 1 or self.grow_min_inliers_se2 < 2:
+            raise ValueError("grow_gate_m > 0, grow_min_inliers >= 1, grow_min_inliers_se2 >= 2 required")
+        if self.grow_margin < 1 or self.grow_max_rounds < 1 or self.refine_iterations < 1:
+            raise ValueError("grow_margin >= 1, grow_max_rounds >= 1, refine_iterations >= 1 required")
+        if self.pair_sigma_m <= 0 or self.robust_c <= 0 or self.refine_gate_factor <= 0:
+            raise ValueError("pair_sigma_m, robust_c and refine_gate_factor must be > 0")
         if self.abs_heading_corr_steps < 1 or self.default_yaw_sigma_rad <= 0:
             raise ValueError("abs_heading_corr_steps >= 1 and default_yaw_sigma_rad > 0 required")
         if self.abs_heading_sigma_rad <= 0 or self.ransac_gate_m <= 0:

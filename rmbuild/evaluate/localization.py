@@ -257,7 +257,7 @@ class EvalResult:
         ax.set_ylim(0, 1)
         ax.set_xlim(left=0)
         ax.grid(alpha=0.3)
-        if ax.lines:
+        if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8, loc="lower right")
         ax.set_title(f"localization error CDF (gauge: {self.gauge}, {len(self.test_walks)} test walks)")
         return fig

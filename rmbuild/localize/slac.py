@@ -270,6 +270,22 @@ class SlacLocalizer:
             g = np.where(a3 > 0, np.maximum(num, 0.0) / np.where(a3 > 0, a3, 1.0), np.inf)
         return g, a3
 
+    def _detection_ll(self, cand: np.ndarray, det: np.ndarray, kk: np.ndarray, bb: np.ndarray) -> np.ndarray:
+        """(P, N) log-probability of which of each candidate RP's APs the scan detected (ours): an AP the
+        RP hears at ψ̄ reads φ = (ψ̄ − b') / k' on the device and is detected with probability
+        (1 − miss_prob) Φ((φ − floor) / s), s = signal_sigma_db / k'."""
+        cfg = self.cfg
+        from scipy.special import ndtr
+
+        psi = self._Psi[cand]  # (P, N, L)
+        rp_det = self._B[cand] > 0
+        k = np.abs(kk)[:, None, None]
+        pred = (psi - bb[:, None, None]) / k
+        p = (1.0 - cfg.miss_prob) * ndtr((pred - cfg.detect_floor_dbm) * k / cfg.signal_sigma_db)
+        p = np.clip(p, 1e-6, 1.0 - 1e-6)
+        ll = np.where(det[None, None, :], np.log(p), np.log1p(-p))
+        return np.where(rp_det, ll, 0.0).sum(axis=2)
+
     # ------------------------------------------------------------- solver
     def _solve(self, gam_c, valid, cap, r_c, f_sum, count, dist_pdr, alpha, beta, theta, fixed_ab):
         """Joint optimisation (eq. 20) for all particles. Shapes: gam_c, valid, r_c[..., :] (P, W, N[, 2]),
@@ -387,6 +403,7 @@ class SlacLocalizer:
             nan_cnt = np.array([np.isnan(f).sum() for f in st.freqs], dtype=float)
             st.fsum = st.fsum + nan_cnt * fmed
         terms = self._scan_terms(np.asarray(rss_dbm))
+        det_scan = ~np.isnan(np.asarray(rss_dbm))
         has_rp = (terms[2] > 0).any(axis=1)  # scan shares an AP with at least one RP
         # coverage: an RP must share >= min_shared_fraction of the scan's APs (or the best any RP shares)
         n_scan_ap = (~np.isnan(np.asarray(rss_dbm))).sum(axis=1)
@@ -464,6 +481,8 @@ class SlacLocalizer:
                 s_new = np.take_along_axis(np.broadcast_to(shared[-1], (p_cur,) + shared[-1].shape),
                                            cand[:, -1], axis=1)
                 ll = -0.5 * s_new * gz[:, -1] / cfg.signal_sigma_db ** 2 + s_new * np.log(np.abs(kk))[:, None]
+                if cfg.detect_floor_dbm is not None:
+                    ll = ll + self._detection_ll(cand[:, -1], det_scan[win[-1]], kk, bb)
                 logw = logw + (w[:, -1] * ll).sum(axis=1)
             theta = np.exp(logw - logw.max())
             theta /= theta.sum()

@@ -132,6 +132,8 @@ class InitResult:
     fits: list[PairFit]
     heading_known: np.ndarray
     abs_rot: np.ndarray
+    grow: object | None = None  # the GrowResult of method "grow"
+    links: tuple | None = None  # (node_k, node_q) scan links that placed walks (grow, knn evidence)
 
 
 def initialise(raw: np.ndarray, path: np.ndarray, walk_of_node: np.ndarray, n_walks: int,

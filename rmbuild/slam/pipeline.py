@@ -36,13 +36,16 @@ from rmbuild.slam.factors import (
     vicinity_factor,
     vicinity_noise,
 )
+from rmbuild.slam.grow import grow, grow_knn
 from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
-from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates
+from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix
 from rmbuild.types import Dataset, Fingerprints
 
 log = logging.getLogger(__name__)
 Progress = Callable[[str, dict], None] | None
+
+_TRACE: list | None = None  # diagnostics hook: set to a list to receive the grow placement trace
 
 POSE_OUT_COLUMNS = ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
 
@@ -242,7 +245,10 @@ def optimize(
         ref_idx = walk_ids.index(cfg.reference_walk)
     nk_all, nq_all = cand["node_k"].to_numpy(), cand["node_q"].to_numpy()
     cross = walk_of[nk_all] != walk_of[nq_all]
-    if cfg.init.method == "ransac":
+    if cfg.init.method == "grow":
+        init = _grow_init(raw, path, walk_of, n_walks, cand[cross], abs_rot, abs_known, abs_sig, cfg, ref_idx,
+                          keep_walk, rm, fp.node, meta)
+    elif cfg.init.method == "ransac":
         init = initialise(raw, path, walk_of, n_walks, cand[cross].reset_index(drop=True), abs_rot, abs_known,
                           abs_sig, cfg.init, ref_idx)
     else:
@@ -272,7 +278,8 @@ def optimize(
         # pool: cross pairs inside one linked component (re-admitted by the outer loop when the solve
         # brings them within d_max) and within-walk pairs consistent with the walk's own PDR geometry
         pool = cross & same_comp
-        first = pool & (d_init < cfg.init.ransac_gate_m)
+        gate0 = cfg.init.grow_gate_m if cfg.init.method == "grow" else cfg.init.ransac_gate_m
+        first = pool & (d_init < gate0)
         if cfg.pairs.within_walk:
             d_raw = np.hypot(*(raw[nk_all, :2] - raw[nq_all, :2]).T)
             gate = cfg.pairs.within_gate_m + cfg.pairs.within_drift_per_m * np.abs(path[nk_all] - path[nq_all])
@@ -459,6 +466,31 @@ def optimize(
 def _frame_rotation_from(T: np.ndarray, init: InitResult, ref: int) -> float:
     """Rotation (rad) applied to the reference frame by anchor placement (T[ref] after vs before)."""
     return float(T[ref, 2] - init.world_T_walk[ref, 2])
+
+
+def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, abs_known, abs_sig,
+               cfg: OptimizeConfig, ref_idx: int | None, keep_walk: np.ndarray, rm: RssMatrix,
+               row_node: np.ndarray, meta: RowMeta) -> InitResult:
+    """Walk frames by incremental walk-to-map placement (rmbuild/slam/grow.py)."""
+    nk, nq = cand_cross["node_k"].to_numpy(), cand_cross["node_q"].to_numpy()
+    known = abs_known & cfg.init.use_abs_heading
+    cnt = np.bincount(np.r_[walk_of[nk], walk_of[nq]], minlength=n_walks).astype(float)
+    if ref_idx is None:
+        ref_idx = int(np.argmax(np.where(keep_walk, cnt, -1)))
+    links = None
+    if cfg.init.grow_evidence == "knn":
+        thr = window_median(rm, meta, cfg.pairs.L_window_steps)
+        g, lk, lq = grow_knn(raw, path, walk_of, n_walks, rm, row_node, thr, abs_rot, known, abs_sig, cfg.init,
+                             cfg.pairs.min_common_aps, ref_idx, keep_walk, cnt, trace=_TRACE)
+        links = (lk, lq)
+    else:
+        g = grow(raw, path, walk_of, n_walks, nk, nq, abs_rot, known, abs_sig, cfg.init, ref_idx, keep_walk,
+                 trace=_TRACE)
+    res = InitResult(g.world_T_walk, g.component, g.component == 0, g.reference, [], g.heading_used & known,
+                     abs_rot)
+    res.grow = g
+    res.links = links
+    return res
 
 
 def _origin_init(cand_cross: pd.DataFrame, walk_of: np.ndarray, n_walks: int, ref_idx: int | None) -> InitResult:
