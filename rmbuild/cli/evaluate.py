@@ -13,7 +13,8 @@ from rmbuild.cli.view import rerun_option
 @click.option("--test-walks", default=None, metavar="ID,ID,...",
               help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
 @click.option("--localizer", "localizers", multiple=True,
-              help="Localizer(s) to run side by side (repeatable; default from config: knn, wknn).")
+              help="Localizer(s) to run side by side (repeatable): knn, wknn, nb, ssd, pfl, slac, and Kalman-smoothed "
+                   "knn_kf, nb_kf, ssd_kf, slac_kf (default from config: knn, wknn).")
 @rerun_option
 @common_options
 def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):

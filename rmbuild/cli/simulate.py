@@ -26,7 +26,7 @@ def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet,
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
-    from rmbuild.config.base import with_overrides
+    from rmbuild.config.base import from_dict, to_dict
     from rmbuild.config.simulate import preset_config
     from rmbuild.errors import InputError
     from rmbuild.stages import simulate as stage
@@ -37,7 +37,9 @@ def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet,
             k, b = (float(v) for v in test_device.split(","))
         except ValueError:
             raise InputError(f"--test-device: expected K,B (two numbers), got {test_device!r}") from None
-        cfg = with_overrides(cfg, "--test-device", test_device=[k, b])
+        data = to_dict(cfg)
+        data.setdefault("devices", {})["test_device"] = [k, b]
+        cfg = from_dict(type(cfg), data, "--test-device")
     with progress_display(quiet) as progress:
         s = stage.run(out_dir, cfg, fmt=fmt, force=force, progress=progress)
     if not quiet:

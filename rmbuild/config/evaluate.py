@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from rmbuild.config.localize import BayesConfig, PflConfig, SlacConfig, SmoothingConfig, SsdConfig
+
 
 @dataclass(frozen=True)
 class KnnConfig:
@@ -50,6 +52,13 @@ class EvaluateConfig:
     # fingerprint is one query.
     query: Literal["scan", "node"] = "scan"
     knn: KnnConfig = field(default_factory=KnnConfig)
+    # the other localizers (docs/localizers.md): SLAC (seed 000), naive Bayes (seed 002), SSD, PFL, and the
+    # Kalman post-filter of the *_kf variants (seed 003)
+    slac: SlacConfig = field(default_factory=SlacConfig)
+    nb: BayesConfig = field(default_factory=BayesConfig)
+    ssd: SsdConfig = field(default_factory=SsdConfig)
+    pfl: PflConfig = field(default_factory=PflConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
 
     def validate(self) -> None:
         if not self.localizers:
@@ -59,3 +68,5 @@ class EvaluateConfig:
         if not 0 <= self.split_offset < self.split_every:
             raise ValueError("split_offset must be in [0, split_every)")
         self.knn.validate()
+        for sub in (self.slac, self.nb, self.ssd, self.pfl, self.smoothing):
+            sub.validate()

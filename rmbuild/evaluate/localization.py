@@ -366,7 +366,8 @@ def evaluate(
             if src is not None:
                 e = np.hypot(*(p - q_ref).T)
                 errors[mname][lname] = e
-                stats[mname][lname] = error_stats(e)
+                # localizer-specific figures (e.g. SLAC's calibrated k, b, alpha, beta) beside the errors
+                stats[mname][lname] = {**error_stats(e), **loc.summary()}
             if mname == "built":
                 consistency.setdefault("built", {})[lname] = error_stats(np.hypot(*(p - q_built).T))
     if src is None:

@@ -186,6 +186,10 @@ class Localizer(Protocol):
 
     def predict(self, query: Query) -> np.ndarray: ...
 
+    def summary(self) -> dict:
+        """Figures about the last predict for the report (e.g. calibrated parameters); {} when none."""
+        ...
+
 
 def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> ReferenceSet:
     """A :class:`ReferenceSet` from a RadioMap (its ``kind`` view: "cells" or "nodes") or as is."""
@@ -199,6 +203,14 @@ def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> Reference
 LOCALIZERS: dict[str, str] = {
     "knn": "rmbuild.localize.knn:KnnLocalizer",
     "wknn": "rmbuild.localize.knn:WeightedKnnLocalizer",
+    "nb": "rmbuild.localize.bayes:NaiveBayesLocalizer",
+    "ssd": "rmbuild.localize.ssd:SsdLocalizer",
+    "pfl": "rmbuild.localize.pfl:PflLocalizer",
+    "slac": "rmbuild.localize.slac:SlacLocalizer",
+    "knn_kf": "rmbuild.localize.smoothing:KnnKalman",
+    "nb_kf": "rmbuild.localize.smoothing:NaiveBayesKalman",
+    "ssd_kf": "rmbuild.localize.smoothing:SsdKalman",
+    "slac_kf": "rmbuild.localize.smoothing:SlacKalman",
 }
 
 

@@ -169,6 +169,10 @@ class KnnLocalizer:
         out[sw == 0] = np.nan
         return out
 
+    def summary(self) -> dict:
+        """Localizer-specific figures for the report (none for kNN)."""
+        return {}
+
     def predict(self, query: Query) -> np.ndarray:
         """(n, 2) metres in the map's frame, one row per query scan; NaN where no RP is admissible."""
         if self.ref is None:
