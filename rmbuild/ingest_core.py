@@ -152,7 +152,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     walks = walks[list(WALK_COLUMNS)]
     walks["source"] = walks["source"].where(walks["source"] != "", source)
     # keep only walks that have poses, in the walks table's order
-    has_poses = walks["walk_id"].isin(set(raw.poses["walk_id"]))
+    has_poses = walks["walk_id"].isin(raw.poses["walk_id"].unique())
     dropped_walks = walks.loc[~has_poses, "walk_id"].tolist()
     walks = walks[has_poses].reset_index(drop=True)
     walk_index = pd.Index(walks["walk_id"])
