@@ -51,8 +51,23 @@ def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: boo
         )
 
 
+def _merge_duplicate_readings(raw: RawInput) -> None:
+    """Keep the first of repeated (walk, t_s, bssid) readings, for formats that allow them."""
+    dup = raw.wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
+    if not dup.any():
+        return
+    kept = np.flatnonzero(~dup)
+    raw.wifi = raw.wifi.iloc[kept].reset_index(drop=True)
+    orig = raw.where.get("wifi")
+    if orig is not None:
+        raw.where["wifi"] = lambda i: orig(int(kept[i]))
+    raw.notes.append(f"merged {int(dup.sum()):,} Wi-Fi readings repeating a BSSID within one scan (first kept)")
+
+
 def validate(raw: RawInput, cfg: IngestConfig) -> None:
     """Checks shared by every format (types and columns were checked by the reader)."""
+    if raw.merge_duplicate_readings:
+        _merge_duplicate_readings(raw)
     poses, wifi, fixes = raw.poses, raw.wifi, raw.fixes
     wp, ww, wf = _where(raw, "poses"), _where(raw, "wifi"), _where(raw, "fixes")
     if len(poses) == 0:

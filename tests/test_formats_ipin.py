@@ -149,3 +149,15 @@ def test_sniff_and_mixed_formats(tmp_path):
     assert not IpinReader.sniff([schema])
     with pytest.raises(InputError, match="mixed formats"):
         read([PHONE, schema])
+
+
+def test_bssid_twice_in_one_scan_is_merged_through_ingest(tmp_path, capsys):
+    from cli_util import run_cli
+
+    lines = (HERE / "tiny_logfile.txt").read_text().splitlines(keepends=True)
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("WIFI;"))
+    lines.insert(i + 1, lines[i])  # the same BSSID again in the same scan
+    (tmp_path / "log.txt").write_text("".join(lines))
+    r = run_cli(capsys, "ingest", tmp_path / "log.txt", "-w", tmp_path / "ws", "--format", "ipin")
+    assert r.code == 0, r.err
+    assert "merged 1 Wi-Fi readings repeating a BSSID" in r.err

@@ -50,6 +50,9 @@ class RawInput:
     notes: list[str] = field(default_factory=list)
     #: table name -> function(row position) -> "file:line" for error messages
     where: dict[str, Callable[[int], str]] = field(default_factory=dict)
+    #: true for formats where one scan may list a BSSID twice (heard on two channels): such repeats of
+    #: (walk, t_s, bssid) are merged (first kept) with a note; false (our schema): they are an input error
+    merge_duplicate_readings: bool = False
 
 
 class Reader(ABC):

@@ -351,6 +351,7 @@ class IpinReader(Reader):
             fixes=pd.concat(fixes, ignore_index=True),
             skipped=dict(sorted(skipped.items())),
             notes=notes,
+            merge_duplicate_readings=True,
             where={
                 "walks": lambda i: str(seen[walks[i]["walk_id"]]),
                 "poses": lambda i: f"{seen[pw[i]]} (step {ps[i]})",
