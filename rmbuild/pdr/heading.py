@@ -7,7 +7,6 @@ absolute yaw the world frame is Android's ENU (x east, y north), so ``yaw_abs_ra
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
@@ -57,6 +56,8 @@ def gyro_yaw(t_s: np.ndarray, gyro_radps: np.ndarray, t_acc_s: np.ndarray, acc_m
     the accelerometer (m, 3) low-passed with time constant ``gravity_tau_s`` and interpolated to ``t_s``.
     Trapezoidal integration.
     """
+    from scipy import signal  # imported here: scipy.signal costs ~1 s at import
+
     t_s = np.asarray(t_s, dtype=np.float64)
     if len(t_s) == 0:
         return np.zeros(0)

@@ -12,7 +12,6 @@ Two detectors, both working on a magnitude signal resampled to a uniform rate an
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from rmbuild.config.pdr import PdrConfig
 
@@ -23,6 +22,8 @@ def prepare_magnitude(t_s: np.ndarray, acc_mps2: np.ndarray, cfg: PdrConfig) -> 
     ``t_s``: (n,) increasing sample times in s; ``acc_mps2``: (n, 3) specific force in m/s² (any frame).
     Returns ``(tu_s, mag_mps2)``, both (m,), on the uniform grid ``t_s[0] + k / sample_hz``.
     """
+    from scipy import signal  # imported here: scipy.signal costs ~1 s at import
+
     t_s = np.asarray(t_s, dtype=np.float64)
     mag = np.linalg.norm(np.asarray(acc_mps2, dtype=np.float64), axis=1)
     if len(t_s) < 2:
@@ -43,6 +44,8 @@ def detect_steps_peak_valley(tu_s: np.ndarray, mag: np.ndarray, cfg: PdrConfig) 
     a valley at least ``pv_min_swing_mps2`` below it, with the candidate at least ``pv_min_interval_s``
     after the previous step, accepts it.
     """
+    from scipy import signal  # imported here: scipy.signal costs ~1 s at import
+
     if len(mag) < 3:
         return np.zeros(0, dtype=np.int64)
     peaks, _ = signal.find_peaks(mag)
