@@ -108,3 +108,12 @@ def test_evaluate_without_ground_truth(tmp_path: Path, capsys) -> None:
     assert "not computed" in r.out
     rep = json.loads((tmp_path / "ws" / "reports" / "evaluate.json").read_text())
     assert rep["maps"] == {} and "errors" in rep["unavailable"]
+
+
+def test_rerunning_a_stage_needs_force(tiny_ws: Path, capsys) -> None:
+    ws = tiny_ws / "ws"
+    before = (ws / "map" / "radiomap.parquet").read_bytes()
+    r = run_cli(capsys, "export-map", "-w", ws, "--cell-size", "3")
+    assert r.code == 2 and "pass --force" in r.err
+    assert (ws / "map" / "radiomap.parquet").read_bytes() == before
+    assert run_cli(capsys, "export-map", "-w", ws, "--force", "-q").code == 0

@@ -33,7 +33,8 @@ def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet
     map_cfg = load_stage_config("map", config_path if config_path else (map_toml if map_toml.is_file() else None))
     walks = [w.strip() for w in test_walks.split(",") if w.strip()] if test_walks else None
     with stage_viewer(rerun, workspace, "evaluate", quiet) as viewer, progress_display(quiet) as progress:
-        report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer)
+        report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer,
+                                  force=force)
     if not quiet:
         click.echo(table)
         click.echo(f"report: {workspace}/reports/evaluate.json, CDF plot: {workspace}/evaluate/cdf.png")

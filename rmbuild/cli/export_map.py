@@ -24,7 +24,7 @@ def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, 
 
     cfg = load_stage_config("map", config_path, overrides={"cell_size_m": cell_size_m})
     with stage_viewer(rerun, workspace, "map", quiet) as viewer, progress_display(quiet) as progress:
-        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer)
+        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force)
     if not quiet:
         click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
                    f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {workspace}/map/")

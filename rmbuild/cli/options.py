@@ -15,7 +15,8 @@ def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """--config, --force, --quiet, -v; sets up logging before the command body runs."""
     f = click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress or tables.")(f)
-    f = click.option("--force", is_flag=True, help="Replace existing outputs.")(f)
+    f = click.option("--force", is_flag=True,
+                     help="Replace this stage's existing outputs (for ingest: the workspace).")(f)
     f = click.option(
         "--config", "config_path", type=click.Path(dir_okay=False), default=None,
         help="TOML file with a table per stage ([ingest], [optimize], ...); unknown keys are errors.",

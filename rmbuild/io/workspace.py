@@ -210,6 +210,14 @@ class Workspace:
                 f"-w {self.root}` first"
             )
 
+    def check_can_write(self, stage: str, force: bool) -> None:
+        """Refuse to replace ``stage``'s existing outputs unless ``force``."""
+        if not force and (self.root / STAGE_DIRS[stage]).exists():
+            raise WorkspaceError(
+                f"{self.root / STAGE_DIRS[stage]} already holds {STAGE_COMMANDS[stage]} outputs; "
+                "pass --force to replace them"
+            )
+
     def path(self, key: str) -> Path:
         return self.root / ARTEFACTS[key]
 

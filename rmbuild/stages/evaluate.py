@@ -20,6 +20,7 @@ def run(
     map_cfg: MapConfig,
     test_walks: list[str] | None = None,
     progress: Progress | None = None,
+    force: bool = False,
     viewer=None,
 ) -> tuple[dict, str]:
     """Evaluate; returns (the evaluate report, a short text table)."""
@@ -38,6 +39,11 @@ def run(
             from rmbuild.errors import InputError
 
             raise InputError(f"--test-walks: unknown walk {unknown[0]!r}")
+    from rmbuild.localize.base import localizer_class
+
+    for name in cfg.localizers:
+        localizer_class(name)  # an unknown name fails before anything runs
+    ws.check_can_write("evaluate", force)
     progress.phase("building maps and localizing")
     res = evaluate(ds, fp, xy, cfg, test_walks=test_walks, gauge=info["gauge"], map_cfg=map_cfg)
     report = {"stage": "evaluate", **res.to_json(), "built_map_frame": info}

@@ -19,6 +19,7 @@ def run(
     cfg: MapConfig,
     anchors_path: str | Path | None = None,
     progress: Progress | None = None,
+    force: bool = False,
     viewer=None,
 ) -> dict:
     """Build the radio map from the optimised poses; returns the export-map report."""
@@ -29,6 +30,7 @@ def run(
     ws = Workspace.open(workspace)
     ds = ws.read_dataset()
     xy, info = built_positions(ws, ds, cfg)
+    ws.check_can_write("map", force)
     if anchors_path is None and ws.exists("optimize.anchors"):
         info["anchors"] = "used by optimize"
     if anchors_path is not None:

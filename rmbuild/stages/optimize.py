@@ -39,6 +39,7 @@ def run(
     cfg: OptimizeConfig,
     anchors_path: str | Path | None = None,
     progress: Progress | None = None,
+    force: bool = False,
     viewer=None,
 ) -> dict:
     """Run the SLAM back end on the workspace's walks; returns the optimize report."""
@@ -50,6 +51,7 @@ def run(
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
     anchors = read_anchors(anchors_path) if anchors_path is not None else None
+    ws.check_can_write("optimize", force)
     state = {"phase": None}
 
     def on_progress(phase: str, info: dict) -> None:
