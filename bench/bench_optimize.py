@@ -1,8 +1,15 @@
 """Benchmark of `rmbuild optimize` (issue 3): kernels, accuracy vs truth, robustness, scaling.
 
-Run from the repo root: ``python -m bench.bench_optimize [--quick] [--skip-large]``. Writes
-bench/results/optimize.json and prints a short markdown table. Each case runs in a fresh subprocess so
-peak memory (ru_maxrss) is per case.
+Run from the repo root: ``python -m bench.bench_optimize [--skip-large] [--skip-real]``. Writes
+bench/results/optimize.json and prints short markdown tables. Each case runs in a fresh subprocess so
+peak memory (ru_maxrss) is per case. Sections:
+- kernels: the three eq. 10 expressions on one 2,000-pose graph (custom_factor: 1 LM iteration only);
+- cases: synthetic presets, rmbuild's pipeline beside the paper preset, 30 % false pairs, large;
+- scaling: subsets of large's walks (~2k / 10k / 50k poses) with pair search / init / solve times and
+  the odometry-only sparse solve as the floor;
+- real: MS ILC site1/F1 and site2/F4 (when /work/shared/datasets exists): optimize -> export-map ->
+  evaluate through the CLI, robust and paper, landmark (waypoint) error raw vs optimised, linked walks,
+  built vs surveyed kNN.
 """
 
 from __future__ import annotations
@@ -10,7 +17,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import resource
+import shutil
 import subprocess
 import sys
 import time
@@ -19,6 +28,40 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "optimize.json"
+DATASETS = Path(os.environ.get("RMBUILD_DATASETS", "/work/shared/datasets"))
+ILC_FLOORS = {"F1": "msft-ilc20/data/site1/F1", "F4": "msft-ilc20/data/site2/F4"}
+SCRATCH = Path(os.environ.get("RMBUILD_BENCH_SCRATCH", "/tmp/rmbuild-bench-optimize"))
+
+
+def _subset(ds, fp, target_poses: int):
+    """Every k-th walk of ``ds`` so that about ``target_poses`` poses remain (node ids re-indexed)."""
+    from rmbuild.types import Fingerprints
+
+    sizes = ds.poses.groupby("walk_id", sort=False).size()
+    wids = list(sizes.index)
+    if target_poses >= sizes.sum():
+        return ds, fp
+    step = max(1, int(sizes.sum() // target_poses))
+    chosen, total = [], 0
+    for off in range(step):
+        for w in wids[off::step]:
+            if total >= target_poses:
+                break
+            if w not in chosen:
+                chosen.append(w)
+                total += int(sizes[w])
+    keep_w = set(chosen)
+    pm = ds.poses["walk_id"].isin(keep_w).to_numpy()
+    new_id = np.cumsum(pm) - 1
+    fm = pm[fp.node]
+    fp2 = Fingerprints(new_id[fp.node[fm]], fp.bssids, fp.rss_dbm[fm], fp.count[fm])
+
+    def sel(df):
+        return None if df is None else df[df["walk_id"].isin(keep_w)].reset_index(drop=True)
+
+    ds2 = dataclasses.replace(ds, walks=sel(ds.walks), poses=sel(ds.poses), wifi=sel(ds.wifi), fixes=sel(ds.fixes),
+                              truth_poses=sel(ds.truth_poses))
+    return ds2, fp2
 
 
 def _load(preset: str, seed: int):
@@ -27,10 +70,15 @@ def _load(preset: str, seed: int):
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import preset_config, simulate
 
+    target = None
+    if "@" in preset:
+        preset, target = preset.split("@")
     sd = simulate(preset_config(preset, seed))
     raw = RawInput(walks=sd.walks, poses=sd.poses, wifi=sd.wifi, fixes=sd.fixes, truth_poses=sd.truth_poses,
                    truth_aps=sd.truth_aps)
     ds, fp, _ = build_dataset(raw, IngestConfig())
+    if target:
+        ds, fp = _subset(ds, fp, int(target))
     return ds, fp
 
 
@@ -42,6 +90,8 @@ def _config(name: str):
     cfg = OptimizeConfig()
     if name == "false30":
         cfg = dataclasses.replace(cfg, inject_false_pairs=0.3)
+    if name == "ransac":  # the walk-pair RANSAC initialisation (before method "grow")
+        cfg = dataclasses.replace(cfg, init=dataclasses.replace(cfg.init, method="ransac"))
     return cfg
 
 
@@ -87,12 +137,35 @@ def run_case(preset: str, mode: str, seed: int) -> dict:
         "odometry_floor_s": round(_odometry_floor(ds), 3),
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
+    out["optimized_linked_walks"] = _linked_metrics(r, ds)
     if ds.truth_poses is not None:
         tr = ds.truth_poses[["x_m", "y_m"]].to_numpy()
         td = np.linalg.norm(tr[r.pairs["node_k"]] - tr[r.pairs["node_q"]], axis=1)
         out["pairs_true_lt5m"] = float(np.mean(td < 5)) if len(td) else None
     out["solve_over_floor"] = round(out["time_s"]["solve"] / max(out["odometry_floor_s"], 1e-6), 1)
     return out
+
+
+def _linked_metrics(r, ds) -> dict | None:
+    """Position error (m) of linked and of unlinked walks after one SE(2) fit on the linked walks."""
+    from rmbuild.evaluate.trajectory import align_se2
+
+    if ds.truth_poses is None:
+        return None
+    linked = set(r.walks.loc[r.walks["linked"], "walk_id"].astype(str))
+    wid = r.poses["walk_id"].astype(str).to_numpy()
+    m = np.isin(wid, list(linked))
+    est, tru = r.poses[["x_m", "y_m"]].to_numpy(float), ds.truth_poses[["x_m", "y_m"]].to_numpy(float)
+    if m.sum() < 2:
+        return None
+    R, t = align_se2(est[m], tru[m])
+    e = np.linalg.norm(est @ R.T + t - tru, axis=1)
+    per_walk = {w: float(np.median(e[wid == w])) for w in np.unique(wid)}
+    lw = np.array([per_walk[w] for w in per_walk if w in linked])
+    uw = np.array([per_walk[w] for w in per_walk if w not in linked])
+    return {"linked": len(lw), "unlinked": len(uw), "linked_mean_m": float(e[m].mean()),
+            "linked_walk_median_m_p50": float(np.median(lw)), "linked_walks_over_5m": int((lw > 5).sum()),
+            "unlinked_mean_m": float(e[~m].mean()) if (~m).any() else None}
 
 
 def kernel_bench(n_walks: int = 8, steps: int = 250, pairs_per_pose: int = 10) -> list[dict]:
@@ -124,38 +197,108 @@ def kernel_bench(n_walks: int = 8, steps: int = 250, pairs_per_pose: int = 10) -
         for k, q in zip(pk.tolist(), pq.tolist()):
             g.add(vicinity_factor(k, q, vc, noise))
         v = poses_to_values(start)
+        reps = 1 if kernel == "custom_factor" else 3
         t = time.perf_counter()
-        for _ in range(3):
+        for _ in range(reps):
             g.linearize(v)
-        t_lin = (time.perf_counter() - t) / 3
+        t_lin = (time.perf_counter() - t) / reps
         p = gtsam.LevenbergMarquardtParams()
-        p.setMaxIterations(10)
+        # the Python CustomFactor costs minutes per LM iteration (GTSAM copies the Values per call)
+        p.setMaxIterations(1 if kernel == "custom_factor" else 10)
         t = time.perf_counter()
         opt = gtsam.LevenbergMarquardtOptimizer(g, v, p)
         res = opt.optimize()
         t_lm = time.perf_counter() - t
         out.append({"kernel": kernel, "poses": len(tr), "vicinity_factors": len(pk), "linearize_s": round(t_lin, 4),
                     "lm_s": round(t_lm, 3), "lm_iterations": int(opt.iterations()),
+                    "lm_s_per_iteration": round(t_lm / max(int(opt.iterations()), 1), 3),
                     "final_error": float(g.error(res))})
     return out
 
 
-CASES = [("default", "robust"), ("default", "paper"), ("default", "false30"), ("corridor12", "robust"),
-         ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust")]
+CASES = [("default", "robust"), ("default", "paper"), ("default", "ransac"), ("default", "false30"),
+         ("corridor12", "robust"), ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust")]
+SCALING = [("large@2000", "robust"), ("large@10000", "robust")]  # + the full large case above
+
+
+def _ilc_workspace(floor: str) -> Path | None:
+    """An ingested workspace of an ILC floor (RMBUILD_BENCH_ILC_<FLOOR>, else ingested once into SCRATCH)."""
+    env = os.environ.get(f"RMBUILD_BENCH_ILC_{floor}")
+    if env and Path(env, "data", "poses.parquet").exists():
+        return Path(env)
+    src = DATASETS / ILC_FLOORS[floor]
+    if not src.exists():
+        return None
+    ws = SCRATCH / f"ilc_{floor}"
+    if not Path(ws, "data", "poses.parquet").exists():
+        cli = Path(sys.executable).with_name("rmbuild")
+        subprocess.run([str(cli), "ingest", str(src), "-w", str(ws), "--force", "-q"], check=True)
+    return ws
+
+
+def real_case(floor: str, mode: str) -> dict:
+    """optimize -> export-map -> evaluate on a copy of the floor's workspace; waypoint and kNN figures."""
+    from rmbuild.evaluate.trajectory import align_se2, interpolate_xy
+    from rmbuild.io.workspace import Workspace
+
+    src = _ilc_workspace(floor)
+    if src is None:
+        return {"floor": floor, "mode": mode, "error": "dataset not found"}
+    ws = SCRATCH / f"run_{floor}_{mode}"
+    shutil.rmtree(ws, ignore_errors=True)
+    ws.mkdir(parents=True)
+    shutil.copytree(src / "data", ws / "data")
+    shutil.copy(src / "manifest.json", ws / "manifest.json")
+    (ws / "reports").mkdir()
+    if (src / "reports" / "ingest.json").exists():
+        shutil.copy(src / "reports" / "ingest.json", ws / "reports" / "ingest.json")
+    cli = str(Path(sys.executable).with_name("rmbuild"))
+    preset = "paper" if mode == "paper" else "rmbuild"
+    t0 = time.perf_counter()
+    subprocess.run([cli, "optimize", "-w", str(ws), "--preset", preset, "--force", "-q"], check=True)
+    t_opt = time.perf_counter() - t0
+    subprocess.run([cli, "export-map", "-w", str(ws), "--force", "-q"], check=True)
+    subprocess.run([cli, "evaluate", "-w", str(ws), "--force", "-q"], check=True)
+    w = Workspace.open(ws)
+    rep, ev = w.read_report("optimize"), w.read_report("evaluate")
+    ds = w.read_dataset()
+    walks = w.read_table("optimize.walks")
+    linked = set(walks.loc[walks["linked"].astype(bool), "walk_id"].astype(str))
+    poses = w.read_table("optimize.poses")
+    fx = ds.fixes[ds.fixes["walk_id"].astype(str).isin(linked)]
+    lm_linked = None
+    if len(fx) >= 2:
+        est = np.vstack([interpolate_xy(poses, wid, g["t_s"].to_numpy(float)) for wid, g in fx.groupby("walk_id")])
+        tru = np.vstack([g[["x_m", "y_m"]].to_numpy(float) for _, g in fx.groupby("walk_id")])
+        ok = np.isfinite(est).all(axis=1)
+        R, t = align_se2(est[ok], tru[ok])
+        e = np.linalg.norm(est[ok] @ R.T + t - tru[ok], axis=1)
+        lm_linked = {"mean": float(e.mean()), "median": float(np.median(e)), "n": int(ok.sum())}
+    knn = {m: {k: ev["maps"][m]["knn"][k] for k in ("mean", "median", "p90")} for m in ev["maps"]}
+    return {"floor": floor, "mode": mode, "walks": rep["walks"], "poses": rep["poses"],
+            "linked_walks": rep.get("linked_walks"), "components": rep.get("components"),
+            "landmark_raw_m": rep["raw"]["landmark_error_m"],
+            "landmark_optimized_m": rep["optimized"]["landmark_error_m"],
+            "landmark_linked_walks_m": lm_linked, "knn": knn, "optimize_s": round(t_opt, 2)}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--case", nargs=3, metavar=("PRESET", "MODE", "SEED"))
     ap.add_argument("--skip-large", action="store_true")
+    ap.add_argument("--skip-real", action="store_true")
+    ap.add_argument("--real", nargs=2, metavar=("FLOOR", "MODE"))
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args()
     if a.case:
         print(json.dumps(run_case(a.case[0], a.case[1], int(a.case[2]))))
         return
-    results = {"kernels": kernel_bench(), "cases": []}
-    for preset, mode in CASES:
-        if a.skip_large and preset == "large":
+    if a.real:
+        print(json.dumps(real_case(a.real[0], a.real[1])))
+        return
+    results = {"kernels": kernel_bench(), "cases": [], "real": []}
+    for preset, mode in CASES + SCALING:
+        if a.skip_large and preset.startswith("large"):
             continue
         p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--case", preset, mode, str(a.seed)],
                            capture_output=True, text=True)
@@ -163,6 +306,16 @@ def main() -> None:
             results["cases"].append({"preset": preset, "mode": mode, "error": p.stderr.strip().splitlines()[-1:]})
             continue
         results["cases"].append(json.loads(p.stdout.strip().splitlines()[-1]))
+    if not a.skip_real and DATASETS.exists():
+        for floor in ILC_FLOORS:
+            for mode in ("robust", "paper"):
+                p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--real", floor, mode],
+                                   capture_output=True, text=True)
+                if p.returncode != 0:
+                    results["real"].append({"floor": floor, "mode": mode,
+                                            "error": p.stderr.strip().splitlines()[-1:]})
+                    continue
+                results["real"].append(json.loads(p.stdout.strip().splitlines()[-1]))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(results, indent=1))
     print("| kernel | linearize s | LM s (10 it) |\n|---|---|---|")
@@ -181,6 +334,17 @@ def main() -> None:
         print(f"| {c['preset']} | {c['mode']} | {c['poses']} | {lm_s} | {hd_s} | "
               f"{o['ate_m']['mean']:.2f} | {c['time_s']['pair_search']:.1f} | {c['time_s']['solve']:.1f} | "
               f"{c['time_s']['optimize_total']:.1f} | {c['odometry_floor_s']:.2f} | {c['peak_memory_mb']:.0f} |")
+    print("\n| floor | mode | linked | landmark raw / opt / linked-only mean m | built / surveyed kNN median m |\n"
+          "|---|---|---|---|---|")
+    for c in results["real"]:
+        if "error" in c:
+            print(f"| {c['floor']} | {c['mode']} | error: {c['error']} |")
+            continue
+        ll = c["landmark_linked_walks_m"]
+        print(f"| {c['floor']} | {c['mode']} | {c['linked_walks']}/{c['walks']} | "
+              f"{c['landmark_raw_m']['mean']:.1f} / {c['landmark_optimized_m']['mean']:.1f} / "
+              f"{ll['mean'] if ll else float('nan'):.1f} | "
+              f"{c['knn']['built']['median']:.1f} / {c['knn']['surveyed']['median']:.1f} |")
 
 
 if __name__ == "__main__":

@@ -61,7 +61,8 @@ class PairConfig:
     within_drift_per_m: float = 0.02
     # candidates per segment are its best match in each of the top_k closest *walks* (one per walk), so
     # a node's candidates spread over many walks instead of piling onto one look-alike walk.
-    per_walk: bool = True
+    # (measured on ILC F1: more walks' candidates but more look-alikes; off by default)
+    per_walk: bool = False
     # fingerprint rows per block of the blocked matrix-product search (memory ~ block * n * 4 bytes).
     block_rows: int = 2048
 
@@ -143,10 +144,17 @@ class InitConfig:
     # nearest placed scans in RSS distance, covered when the nearest is below grow_cover_factor x its
     # own walk's window median d_med; a walk needs grow_min_inlier_frac of its covered scans as inliers)
     # or "pairs" (the candidate pairs of the search, counted per distinct scan, with grow_margin).
-    grow_evidence: Literal["knn", "pairs"] = "knn"
+    # "both": "pairs" first, then "knn" rounds extend the map it built.
+    grow_evidence: Literal["knn", "pairs", "both"] = "both"
     grow_knn_k: int = 3
     grow_cover_factor: float = 1.0
     grow_min_inlier_frac: float = 0.5
+    # m of walked path; a long walk is fitted on windows of this length (half-overlapping; the best
+    # accepted window places it), so its dead-reckoning drift does not break the rigid fit. 0 = whole walk.
+    grow_window_m: float = 60.0
+    # also place a walk through an accepted walk-pair RANSAC fit (method "ransac"'s rule: min_inliers,
+    # min_inlier_ratio, min_shared_path_m) to an already placed walk when its walk-to-map fit fails.
+    grow_pair_edges: bool = True
     # walk-level refinement: m, 1-sigma of a pair's position difference; Cauchy scale in sigmas; Gauss-
     # Newton iterations; pairs within refine_gate_factor * grow_gate_m of each other are used.
     pair_sigma_m: float = 3.0

@@ -253,6 +253,15 @@ def optimize(
                           abs_sig, cfg.init, ref_idx)
     else:
         init = _origin_init(cand[cross], walk_of, n_walks, ref_idx)
+    if init.links is not None and len(init.links[0]):
+        # scan links that placed walks on the map (kNN evidence) join the candidate pool
+        lk, lq = init.links
+        extra = pd.DataFrame({"node_k": np.minimum(lk, lq), "node_q": np.maximum(lk, lq), "rss_dist": np.nan,
+                              "common": 0, "kind": "cross", "injected": False})
+        cand = pd.concat([cand, extra], ignore_index=True).drop_duplicates(["node_k", "node_q"])
+        cand = cand.reset_index(drop=True)
+        nk_all, nq_all = cand["node_k"].to_numpy(), cand["node_q"].to_numpy()
+        cross = walk_of[nk_all] != walk_of[nq_all]
     T = init.world_T_walk.copy()
     if progress:
         progress("init", {"linked": int(init.linked.sum()), "walks": n_walks})
@@ -478,14 +487,20 @@ def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, a
     if ref_idx is None:
         ref_idx = int(np.argmax(np.where(keep_walk, cnt, -1)))
     links = None
-    if cfg.init.grow_evidence == "knn":
+    g = None
+    edges = None
+    if cfg.init.grow_pair_edges:
+        pw = initialise(raw, path, walk_of, n_walks, cand_cross.reset_index(drop=True), abs_rot, abs_known, abs_sig,
+                        cfg.init, ref_idx)
+        edges = [(f.a, f.b, f.T) for f in pw.fits if f.accepted]
+    if cfg.init.grow_evidence in ("pairs", "both"):
+        g = grow(raw, path, walk_of, n_walks, nk, nq, abs_rot, known, abs_sig, cfg.init, ref_idx, keep_walk,
+                 trace=_TRACE, edges=edges)
+    if cfg.init.grow_evidence in ("knn", "both"):
         thr = window_median(rm, meta, cfg.pairs.L_window_steps)
         g, lk, lq = grow_knn(raw, path, walk_of, n_walks, rm, row_node, thr, abs_rot, known, abs_sig, cfg.init,
-                             cfg.pairs.min_common_aps, ref_idx, keep_walk, cnt, trace=_TRACE)
+                             cfg.pairs.min_common_aps, ref_idx, keep_walk, cnt, trace=_TRACE, start=g)
         links = (lk, lq)
-    else:
-        g = grow(raw, path, walk_of, n_walks, nk, nq, abs_rot, known, abs_sig, cfg.init, ref_idx, keep_walk,
-                 trace=_TRACE)
     res = InitResult(g.world_T_walk, g.component, g.component == 0, g.reference, [], g.heading_used & known,
                      abs_rot)
     res.grow = g

@@ -1,0 +1,76 @@
+"""The walk-to-map initialisation (rmbuild/slam/grow.py): refinement, fits, short walks that only cross."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+pytest.importorskip("gtsam")
+
+from rmbuild.config.optimize import InitConfig, OptimizeConfig  # noqa: E402
+from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
+from rmbuild.slam import optimize  # noqa: E402
+from rmbuild.slam.grow import _fit_offsets, covered_m, refine_walks, world_xy  # noqa: E402
+from rmbuild.slam.testing import make_venue  # noqa: E402
+
+
+def test_refine_walks_recovers_frames():
+    rng = np.random.default_rng(0)
+    n_w, per = 4, 30
+    raw = np.zeros((n_w * per, 3))
+    walk_of = np.repeat(np.arange(n_w), per)
+    truth = np.array([[0, 0, 0], [5, -3, 0.3], [-4, 6, -0.5], [10, 2, 1.0]], float)
+    for w in range(n_w):
+        raw[w * per:(w + 1) * per, :2] = rng.uniform(-10, 10, (per, 2))
+    world = world_xy(raw, truth, walk_of, np.arange(len(raw)))
+    # pairs: nodes of different walks whose true positions are within 3 m, plus 30 % random false pairs
+    d = np.linalg.norm(world[:, None] - world[None], axis=2)
+    i, j = np.nonzero((d < 3) & (walk_of[:, None] < walk_of[None, :]))
+    fi, fj = rng.integers(0, len(raw), len(i) // 3), rng.integers(0, len(raw), len(i) // 3)
+    ok = walk_of[fi] != walk_of[fj]
+    nk, nq = np.r_[i, fi[ok]], np.r_[j, fj[ok]]
+    T0 = truth + np.c_[rng.normal(0, 2, (n_w, 2)), rng.normal(0, 0.1, n_w)]
+    T0[0] = truth[0]
+    prior = np.full(n_w, np.nan)
+    T = refine_walks(T0, np.ones(n_w, bool), nk, nq, raw, walk_of, 0, prior, np.full(n_w, 0.1), InitConfig(),
+                     iterations=20)
+    assert np.abs(T[:, :2] - truth[:, :2]).max() < 1.0
+    assert np.abs(T[:, 2] - truth[:, 2]).max() < 0.1  # pairs are within 3 m, not coincident
+
+
+def test_fit_offsets_translation_and_se2():
+    rng = np.random.default_rng(1)
+    p = np.c_[np.linspace(0, 30, 15), np.zeros(15)]
+    th, t = 0.4, np.array([3.0, -2.0])
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    x = p @ R.T + t + rng.normal(0, 0.5, p.shape)
+    x[:4] += rng.uniform(-30, 30, (4, 2))  # outlier scans
+    path = p[:, 0]
+    icfg = InitConfig()
+    f = _fit_offsets(p, x, path, th, icfg, rng)
+    assert f.method == "translation" and f.score >= 10 and np.allclose(f.t[:2], t, atol=1.0)
+    f2 = _fit_offsets(p, x, path, None, icfg, rng)
+    assert f2.method == "se2" and abs(f2.t[2] - th) < 0.1
+    assert covered_m(path[f.inliers]) >= 20
+
+
+def test_grow_links_short_crossing_walks():
+    """Many short walks (~60 steps) with known heading: most are linked and placed."""
+    ds, fp = make_venue(n_walks=14, steps_per_walk=60, seed=11)
+    r = optimize(ds, fp, OptimizeConfig())
+    assert r.walks["linked"].sum() >= 10
+    lm = trajectory_metrics(r.poses, ds)["landmark_error_m"]
+    raw = trajectory_metrics(ds.poses, ds)["landmark_error_m"]
+    assert lm["mean"] < raw["mean"]
+
+
+def test_grow_evidence_variants_run():
+    ds, fp = make_venue(n_walks=4, steps_per_walk=150, seed=2)
+    for ev in ("pairs", "knn"):
+        cfg = OptimizeConfig()
+        cfg = dataclasses.replace(cfg, init=dataclasses.replace(cfg.init, grow_evidence=ev))
+        r = optimize(ds, fp, cfg)
+        assert r.walks["linked"].sum() >= 2
+        assert r.walks["linked"].to_numpy()[r.walks["reference"].to_numpy()].all()
