@@ -60,7 +60,8 @@ def test_grow_links_short_crossing_walks():
     """Many short walks (~60 steps) with known heading: most are linked and placed."""
     ds, fp = make_venue(n_walks=14, steps_per_walk=60, seed=11)
     r = optimize(ds, fp, OptimizeConfig())
-    assert r.walks["linked"].sum() >= 10
+    # 13 of 14 with grow_min_lead = 0; the lead rule (false-pair robustness) rejects 3-vs-1 splits here
+    assert r.walks["linked"].sum() >= 9
     lm = trajectory_metrics(r.poses, ds)["landmark_error_m"]
     raw = trajectory_metrics(ds.poses, ds)["landmark_error_m"]
     assert lm["mean"] < raw["mean"]
@@ -74,3 +75,14 @@ def test_grow_evidence_variants_run():
         r = optimize(ds, fp, cfg)
         assert r.walks["linked"].sum() >= 2
         assert r.walks["linked"].to_numpy()[r.walks["reference"].to_numpy()].all()
+
+
+def test_accept_needs_lead_over_second_hypothesis():
+    """A 4-vs-2 inlier split passes the ratio margin but not an absolute lead of 3 (chance alignments)."""
+    from rmbuild.slam.grow import WalkFit, _accept
+
+    f = WalkFit(np.zeros(3), 4, 2, 9.0, 1, "translation", np.ones(3, bool))
+    assert _accept(f, InitConfig(grow_margin=1.5, grow_min_lead=0), se2=False)
+    assert not _accept(f, InitConfig(grow_margin=1.5, grow_min_lead=3), se2=False)
+    f.second = 0
+    assert _accept(f, InitConfig(grow_margin=1.5, grow_min_lead=3), se2=False)

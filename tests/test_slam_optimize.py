@@ -106,3 +106,15 @@ def test_single_step_walk_and_disconnected(venue):
     r = optimize(ds2, fp2, OptimizeConfig())
     assert any("skipped" in w for w in r.stats["warnings"])
     assert any("disconnected" in w for w in r.stats["warnings"])
+
+
+def test_false_pair_robustness_small_venue():
+    """30 % of the vicinity candidates replaced by random cross-walk pairs: landmark error within 1.5x."""
+    ds, fp = make_venue(n_walks=8, steps_per_walk=200, seed=4)
+    clean = optimize(ds, fp, OptimizeConfig())
+    noisy = optimize(ds, fp, OptimizeConfig(inject_false_pairs=0.3))
+    assert noisy.candidates["injected"].mean() > 0.2
+    e_clean = trajectory_metrics(clean.poses, ds)["landmark_error_m"]["mean"]
+    e_noisy = trajectory_metrics(noisy.poses, ds)["landmark_error_m"]["mean"]
+    assert noisy.walks["linked"].all()
+    assert e_noisy <= 1.5 * max(e_clean, 0.5)

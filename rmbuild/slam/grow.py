@@ -224,7 +224,8 @@ def _accept(f: WalkFit | None, icfg: InitConfig, se2: bool) -> bool:
         return False
     min_path = icfg.refit_rotation_min_path_m if se2 else icfg.grow_min_shared_m
     min_inl = icfg.grow_min_inliers_se2 if se2 else icfg.grow_min_inliers
-    return bool(f.score >= min_inl and f.shared_m >= min_path and f.score >= icfg.grow_margin * f.second)
+    return bool(f.score >= min_inl and f.shared_m >= min_path and f.score >= icfg.grow_margin * f.second
+                and f.score >= f.second + icfg.grow_min_lead)
 
 
 def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, nk: np.ndarray, nq: np.ndarray,
