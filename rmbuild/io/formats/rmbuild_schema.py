@@ -56,6 +56,8 @@ def _table_of(p: Path) -> str | None:
     in_truth = p.parent.name == "truth"
     if in_truth and p.name == "venue.json":
         return "truth/venue"
+    if in_truth and p.suffix == ".toml":
+        return "truth/provenance"  # e.g. the config simulate used: kept with the input, not ingested
     if _suffix(p) is None:
         return None
     stem = p.name.lower()
@@ -249,6 +251,8 @@ class RmbuildSchemaReader(Reader):
         if skipped:
             raw.skipped["unrecognised file"] = skipped
         for t, fs in by_table.items():
+            if t == "truth/provenance":
+                continue
             if t == "truth/venue":
                 try:
                     raw.venue = json.loads(fs[0].read_text())
