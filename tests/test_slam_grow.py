@@ -86,3 +86,25 @@ def test_accept_needs_lead_over_second_hypothesis():
     assert not _accept(f, InitConfig(grow_margin=1.5, grow_min_lead=3), se2=False)
     f.second = 0
     assert _accept(f, InitConfig(grow_margin=1.5, grow_min_lead=3), se2=False)
+
+
+def test_accept_spread_and_untrusted_se2_path():
+    """The spread rule rejects a short walk's translation fit whose inliers cluster at one place (off by
+    default, long walks exempt); an SE(2) fit of a walk without a trusted heading uses its own path minimum."""
+    from rmbuild.slam.grow import WalkFit, _accept, _walk_lengths
+
+    f = WalkFit(np.zeros(3), 6, 0, 9.0, 2, "translation", np.ones(6, bool), span_m=4.0)
+    assert _accept(f, InitConfig(), se2=False, walk_len=30.0)  # default: rule off
+    cfg = InitConfig(grow_min_span_frac=0.3, grow_span_max_walk_m=40.0)
+    assert not _accept(f, cfg, se2=False, walk_len=30.0)
+    assert _accept(f, cfg, se2=False, walk_len=50.0)  # long walk: exempt
+    f.span_m = 10.0
+    assert _accept(f, cfg, se2=False, walk_len=30.0)
+    g = WalkFit(np.zeros(3), 8, 0, 12.0, 2, "se2", np.ones(8, bool), span_m=12.0)
+    assert not _accept(g, InitConfig(), se2=True, untrusted=True)  # refit_rotation_min_path_m = 20
+    assert _accept(g, InitConfig(grow_se2_min_shared_m=12.0), se2=True, untrusted=True)
+    assert not _accept(g, InitConfig(grow_se2_min_shared_m=12.0), se2=True, untrusted=False)
+    wl = _walk_lengths(np.array([0.0, 5.0, 90.0, 1.0, 3.0]), np.array([0, 0, 0, 1, 1]), 3, InitConfig())
+    assert np.allclose(wl, [60.0, 2.0, 0.0])
+    with pytest.raises(ValueError):
+        InitConfig(grow_min_span_frac=1.5).validate()

@@ -143,6 +143,15 @@ class InitConfig:
     # `default` with 30 % injected false pairs: 0 -> 3.06 m landmark mean, 2 -> 1.38 m; costs short
     # crossing walks some links: 14 x 60-step venue 13 -> 9 linked).
     grow_min_lead: int = 2
+    # m of shared path an SE(2) placement needs for a walk without a trusted magnetometer heading (none, or
+    # dropped as an outlier); 0 = refit_rotation_min_path_m (as for walks whose translation-only fit failed).
+    grow_se2_min_shared_m: float = 0.0
+    # spread of a translation-only placement: the walked path between its first and last inlier scan must be
+    # at least this fraction of the walk's length (of the fitted window on long walks), so matches clustered
+    # at one place (a look-alike spot) do not place a short walk. 0 = off.
+    grow_min_span_frac: float = 0.0
+    # m; the spread rule applies to walks up to this walked length (long walks seed the map from one crossing).
+    grow_span_max_walk_m: float = 40.0
     # rounds of placement (each round: fit every unplaced walk to the map, place all accepted, refine).
     grow_max_rounds: int = 100
     # evidence a walk is fitted with: "knn" (each scan localised on the placed map by its grow_knn_k
@@ -173,6 +182,8 @@ class InitConfig:
     def validate(self) -> None:
         if self.grow_gate_m <= 0 or self.grow_min_inliers < 1 or self.grow_min_inliers_se2 < 2:
             raise ValueError("grow_gate_m > 0, grow_min_inliers >= 1, grow_min_inliers_se2 >= 2 required")
+        if self.grow_se2_min_shared_m < 0 or not 0 <= self.grow_min_span_frac <= 1:
+            raise ValueError("grow_se2_min_shared_m >= 0 and 0 <= grow_min_span_frac <= 1 required")
         if self.grow_margin < 1 or self.grow_max_rounds < 1 or self.refine_iterations < 1:
             raise ValueError("grow_margin >= 1, grow_max_rounds >= 1, refine_iterations >= 1 required")
         if self.pair_sigma_m <= 0 or self.robust_c <= 0 or self.refine_gate_factor <= 0:

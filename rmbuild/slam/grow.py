@@ -129,6 +129,7 @@ class WalkFit:
     partners: int  # placed walks among the inliers
     method: str  # "translation" or "se2"
     inliers: np.ndarray  # bool over the given pairs
+    span_m: float = 0.0  # walked path between the first and the last inlier scan of the walk
 
 
 def _score(inl: np.ndarray, wnode_idx: np.ndarray, n_u: int) -> np.ndarray:
@@ -204,7 +205,8 @@ def fit_walk_to_map(pm: np.ndarray, pw: np.ndarray, wnode: np.ndarray, wpath: np
     second = int(score[far].max()) if far.any() else 0
     return WalkFit(np.array([t[0], t[1], float(_wrap(th))]), best, second,
                    covered_m(wpath[inl_final]) if inl_final.any() else 0.0,
-                   int(len(np.unique(mwalk[inl_final]))), "translation" if rot is not None else "se2", inl_final)
+                   int(len(np.unique(mwalk[inl_final]))), "translation" if rot is not None else "se2", inl_final,
+                   float(np.ptp(wpath[inl_final])) if inl_final.any() else 0.0)
 
 
 @dataclass
@@ -219,13 +221,31 @@ class GrowResult:
     heading_used: np.ndarray  # (n_walks,) bool: magnetometer rotation used (not overruled by an SE(2) fit)
 
 
-def _accept(f: WalkFit | None, icfg: InitConfig, se2: bool) -> bool:
+def _min_path(icfg: InitConfig, se2: bool, untrusted: bool) -> float:
+    if not se2:
+        return icfg.grow_min_shared_m
+    if untrusted and icfg.grow_se2_min_shared_m > 0:
+        return icfg.grow_se2_min_shared_m
+    return icfg.refit_rotation_min_path_m
+
+
+def _spread_ok(f: WalkFit, icfg: InitConfig, se2: bool, walk_len: float | None) -> bool:
+    """Translation-only fits: inliers spread over grow_min_span_frac of the walk (or window) length."""
+    if se2 or icfg.grow_min_span_frac <= 0 or walk_len is None or walk_len > icfg.grow_span_max_walk_m:
+        return True
+    return f.span_m >= icfg.grow_min_span_frac * walk_len
+
+
+def _accept(f: WalkFit | None, icfg: InitConfig, se2: bool, walk_len: float | None = None,
+            untrusted: bool = False) -> bool:
+    """``walk_len``: walked length (m) the spread rule refers to; ``untrusted``: the walk has no trusted
+    magnetometer heading (an SE(2) fit then needs grow_se2_min_shared_m of shared path when set)."""
     if f is None:
         return False
-    min_path = icfg.refit_rotation_min_path_m if se2 else icfg.grow_min_shared_m
+    min_path = _min_path(icfg, se2, untrusted)
     min_inl = icfg.grow_min_inliers_se2 if se2 else icfg.grow_min_inliers
     return bool(f.score >= min_inl and f.shared_m >= min_path and f.score >= icfg.grow_margin * f.second
-                and f.score >= f.second + icfg.grow_min_lead)
+                and f.score >= f.second + icfg.grow_min_lead and _spread_ok(f, icfg, se2, walk_len))
 
 
 def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, nk: np.ndarray, nq: np.ndarray,
@@ -248,6 +268,7 @@ def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, n
     method = np.full(n_walks, "", dtype=object)
     heading_used = rot_known.copy()
     cand_count = np.bincount(np.r_[wk, wq], minlength=n_walks)
+    wlen = _walk_lengths(path, walk_of, n_walks, icfg)
     seed = reference
     c_id = 0
     while seed is not None:
@@ -279,12 +300,12 @@ def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, n
                 f = None
                 if np.isfinite(prior[w]):
                     f = fit_walk_to_map(*args, float(prior[w]), icfg, rng)
-                    ok = _accept(f, icfg, se2=False)
+                    ok = _accept(f, icfg, se2=False, walk_len=wlen[w])
                 else:
                     ok = False
                 if not ok:
                     f2 = fit_walk_to_map(*args, None, icfg, rng)
-                    if _accept(f2, icfg, se2=True):
+                    if _accept(f2, icfg, se2=True, untrusted=not (np.isfinite(prior[w]) and heading_used[w])):
                         f, ok = f2, True
                 if ok:
                     new.append((w, f))
@@ -332,6 +353,16 @@ def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, n
             T[w, 2] = _wrap(rot_abs[w] - ref_rot)
     # components ordered: 0 = reference's; the rest keep their discovery order
     return GrowResult(T, comp, reference, rnd, n_inl, shared, method, heading_used & (comp >= 0))
+
+
+def _walk_lengths(path: np.ndarray, walk_of: np.ndarray, n_walks: int, icfg: InitConfig) -> np.ndarray:
+    """Walked length (m) of each walk, capped at grow_window_m (the length a rigid fit covers) when set."""
+    hi = np.full(n_walks, -np.inf)
+    lo = np.full(n_walks, np.inf)
+    np.maximum.at(hi, walk_of, path)
+    np.minimum.at(lo, walk_of, path)
+    wl = np.where(np.isfinite(hi), hi - lo, 0.0)
+    return np.minimum(wl, icfg.grow_window_m) if icfg.grow_window_m > 0 else wl
 
 
 def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -403,16 +434,19 @@ def _fit_offsets(p_own: np.ndarray, x_hat: np.ndarray, path: np.ndarray, rot: fl
             t = np.mean(x_hat[cur] - p_own[cur] @ _rot(th).T, axis=0)
     inl = np.linalg.norm(x_hat - (p_own @ _rot(th).T + t), axis=1) < gate
     return WalkFit(np.array([t[0], t[1], float(_wrap(th))]), int(inl.sum()), m - int(inl.sum()),
-                   covered_m(path[inl]) if inl.any() else 0.0, 0, "translation" if rot is not None else "se2", inl)
+                   covered_m(path[inl]) if inl.any() else 0.0, 0, "translation" if rot is not None else "se2", inl,
+                   float(np.ptp(path[inl])) if inl.any() else 0.0)
 
 
-def _accept_knn(f: WalkFit | None, icfg: InitConfig, se2: bool) -> bool:
+def _accept_knn(f: WalkFit | None, icfg: InitConfig, se2: bool, walk_len: float | None = None,
+                untrusted: bool = False) -> bool:
     if f is None:
         return False
     n = f.score + f.second
-    min_path = icfg.refit_rotation_min_path_m if se2 else icfg.grow_min_shared_m
+    min_path = _min_path(icfg, se2, untrusted)
     min_inl = icfg.grow_min_inliers_se2 if se2 else icfg.grow_min_inliers
-    return bool(f.score >= min_inl and f.shared_m >= min_path and f.score >= icfg.grow_min_inlier_frac * n)
+    return bool(f.score >= min_inl and f.shared_m >= min_path and f.score >= icfg.grow_min_inlier_frac * n
+                and _spread_ok(f, icfg, se2, walk_len))
 
 
 def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, rm, row_node: np.ndarray,
@@ -451,6 +485,7 @@ def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: in
     link_k: list[np.ndarray] = []
     link_q: list[np.ndarray] = []
     rows_of = [np.flatnonzero(row_walk == w) for w in range(n_walks)]
+    wlen = _walk_lengths(path, walk_of, n_walks, icfg)
     thr_eff = np.where(np.isfinite(thr), thr, np.nanmedian(thr) if np.isfinite(thr).any() else np.inf)
     thr_eff = thr_eff * icfg.grow_cover_factor
     seed = reference
@@ -516,10 +551,11 @@ def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: in
                     fw, okw = None, False
                     if np.isfinite(prior[w]):
                         fw = _fit_offsets(*args, float(prior[w]), icfg, rng)
-                        okw = _accept_knn(fw, icfg, se2=False)
+                        okw = _accept_knn(fw, icfg, se2=False, walk_len=wlen[w])
                     if not okw:
                         f2 = _fit_offsets(*args, None, icfg, rng)
-                        if _accept_knn(f2, icfg, se2=True):
+                        if _accept_knn(f2, icfg, se2=True,
+                                       untrusted=not (np.isfinite(prior[w]) and heading_used[w])):
                             fw, okw = f2, True
                     if okw and (f is None or not ok or fw.score > f.score):
                         full = np.zeros(len(pth), bool)
