@@ -118,3 +118,14 @@ def test_false_pair_robustness_small_venue():
     e_noisy = trajectory_metrics(noisy.poses, ds)["landmark_error_m"]["mean"]
     assert noisy.walks["linked"].all()
     assert e_noisy <= 1.5 * max(e_clean, 0.5)
+
+
+def test_anchor_just_before_the_first_step_fixes_the_first_pose():
+    from rmbuild.slam.pipeline import _anchor_nodes
+
+    poses = pd.DataFrame({"walk_id": ["a"] * 3 + ["b"] * 3, "t_s": [10.0, 10.5, 11.0, 20.0, 20.5, 21.0]})
+    slices = {"a": slice(0, 3), "b": slice(3, 6)}
+    anchors = pd.DataFrame({"walk_id": ["b", "a"], "t_s": [19.2, 11.4], "x_m": [0.0, 1.0], "y_m": [0.0, 1.0]})
+    assert list(_anchor_nodes(anchors, poses, slices, max_gap_s=1.0)) == [3, 2]
+    with pytest.raises(InputError, match="anchor_max_gap_s = 0.5"):
+        _anchor_nodes(anchors, poses, slices, max_gap_s=0.5)

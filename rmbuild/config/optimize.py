@@ -215,6 +215,9 @@ class SolveConfig:
     gauge_sigma_rad: float = 1e-4
     # m; 1-sigma of an anchor position prior.
     anchor_sigma_m: float = 0.5
+    # s; an anchor may lie this far before a walk's first pose or after its last (it then fixes that end
+    # pose); further out is an input error. A landmark press often comes just before the first step.
+    anchor_max_gap_s: float = 2.0
     # steps; per-pose heading prior from yaw_abs in the joint solve on every n-th step (0 = off), with
     # the step's yaw_abs_sigma_rad times heading_prior_sigma_scale (n ~ the disturbance's correlation
     # length, so the priors are roughly independent). They also correct the PDR's heading drift.
@@ -231,6 +234,8 @@ class SolveConfig:
             raise ValueError("max_iterations >= 1, outer_iterations >= 1, heading_prior_every_n >= 0")
         if self.heading_prior_sigma_scale <= 0:
             raise ValueError("heading_prior_sigma_scale must be > 0")
+        if self.anchor_max_gap_s < 0:
+            raise ValueError("solve.anchor_max_gap_s must be >= 0")
         if self.gauge_sigma_m <= 0 or self.gauge_sigma_rad <= 0 or self.anchor_sigma_m <= 0:
             raise ValueError("gauge and anchor sigmas must be > 0")
 

@@ -104,8 +104,10 @@ def _check_inputs(dataset: Dataset, fp: Fingerprints, cfg: OptimizeConfig) -> tu
     return keep, warnings
 
 
-def _anchor_nodes(anchors: pd.DataFrame, poses: pd.DataFrame, slices: dict[str, slice]) -> np.ndarray:
-    """Node id of the pose nearest in time to each anchor; InputError outside a walk's time span."""
+def _anchor_nodes(anchors: pd.DataFrame, poses: pd.DataFrame, slices: dict[str, slice],
+                  max_gap_s: float = 0.0) -> np.ndarray:
+    """Node id of the pose nearest in time to each anchor; InputError when an anchor lies more than
+    ``max_gap_s`` outside its walk's time span."""
     for col in ("walk_id", "t_s", "x_m", "y_m"):
         if col not in anchors:
             raise InputError(f"anchors table lacks column {col!r}")
@@ -116,8 +118,9 @@ def _anchor_nodes(anchors: pd.DataFrame, poses: pd.DataFrame, slices: dict[str, 
             raise InputError(f"anchor {i}: unknown walk {wid!r}")
         s = slices[wid]
         tt = t[s]
-        if not (tt[0] <= ta <= tt[-1]) or not np.isfinite(ta):
-            raise InputError(f"anchor {i}: t_s={ta} is outside walk {wid}'s time span [{tt[0]}, {tt[-1]}]")
+        if not np.isfinite(ta) or not (tt[0] - max_gap_s <= ta <= tt[-1] + max_gap_s):
+            raise InputError(f"anchor {i}: t_s={ta} is outside walk {wid}'s time span [{tt[0]}, {tt[-1]}] "
+                             f"(by more than solve.anchor_max_gap_s = {max_gap_s:g} s)")
         out[i] = s.start + int(np.argmin(np.abs(tt - ta)))
     return out
 
@@ -268,7 +271,7 @@ def optimize(
 
     anchor_nodes = np.zeros(0, np.int64)
     if anchors is not None and len(anchors):
-        anchor_nodes = _anchor_nodes(anchors, poses, slices)
+        anchor_nodes = _anchor_nodes(anchors, poses, slices, cfg.solve.anchor_max_gap_s)
     init_xyt = _apply_frames(raw, starts, ends, T)
     gauge_full, gauge_rot_only = _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init, T,
                                                      raw, starts, ends)
