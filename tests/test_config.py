@@ -39,3 +39,18 @@ def test_file_layers(tmp_path: Path) -> None:
     p.write_text("[ingest\n")
     with pytest.raises(ConfigError, match="invalid TOML"):
         load_stage_config("ingest", p)
+
+
+def test_config_command_prints_a_file_that_loads_back(tmp_path: Path, capsys) -> None:
+    from cli_util import run_cli
+
+    r = run_cli(capsys, "config")
+    assert r.code == 0
+    doc = tomllib.loads(r.out)
+    assert set(doc) == set(SECTIONS)
+    assert "# m; grid cell edge" in r.out  # the field comments (units) come along
+    (tmp_path / "all.toml").write_text(r.out)
+    for name in SECTIONS:
+        assert load_stage_config(name, tmp_path / "all.toml") == SECTIONS[name]()
+    r = run_cli(capsys, "config", "--stage", "nope")
+    assert r.code == 2 and "unknown section 'nope'" in r.err

@@ -21,6 +21,7 @@ COMMANDS = {
     "evaluate": "rmbuild.cli.evaluate:evaluate",
     "view": "rmbuild.cli.view:view",
     "report": "rmbuild.cli.report:report",
+    "config": "rmbuild.cli.config_cmd:config",
 }
 
 #: one-line summaries shown by `rmbuild --help` without importing the commands
@@ -32,6 +33,7 @@ SUMMARIES = {
     "evaluate": "Localize held-out walks with built, surveyed and raw maps.",
     "view": "Log a workspace to the rerun viewer.",
     "report": "Write a one-page HTML report of a workspace.",
+    "config": "Print every stage's settings as TOML (defaults, or a file resolved).",
 }
 
 

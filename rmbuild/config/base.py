@@ -122,22 +122,50 @@ def _toml_value(v: Any) -> str:
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
-def to_toml(cfg: Any, section: str) -> str:
-    """Serialise a config dataclass (nested dataclasses become sub-tables) as TOML text."""
+def field_comments(cls: type) -> dict[str, list[str]]:
+    """The ``#`` comment lines written just above each field of a config dataclass (its unit and meaning)."""
+    import inspect
+
+    try:
+        src = inspect.getsource(cls).splitlines()
+    except (OSError, TypeError):
+        return {}
+    out: dict[str, list[str]] = {}
+    pending: list[str] = []
+    for line in src:
+        t = line.strip()
+        if t.startswith("#"):
+            pending.append(t.lstrip("#").strip())
+            continue
+        head = t.split(":", 1)[0].strip()
+        if pending and head.isidentifier() and ":" in t and not t.startswith(("def ", "class ", "@")):
+            out[head] = pending
+        pending = []
+    return out
+
+
+def to_toml(cfg: Any, section: str, comments: bool = False) -> str:
+    """Serialise a config dataclass (nested dataclasses become sub-tables) as TOML text.
+
+    ``comments``: put each field's source comment (unit, meaning, the paper's value) above it.
+    """
     lines: list[str] = []
     nested: list[tuple[str, Any]] = []
+    notes = field_comments(type(cfg)) if comments else {}
     lines.append(f"[{section}]")
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
         if dataclasses.is_dataclass(v):
             nested.append((f"{section}.{f.name}", v))
-        elif v is None:
+            continue
+        lines.extend(f"# {c}" for c in notes.get(f.name, []))
+        if v is None:
             lines.append(f"# {f.name} = (unset)")
         else:
             lines.append(f"{f.name} = {_toml_value(v)}")
     text = "\n".join(lines) + "\n"
     for sub, v in nested:
-        text += "\n" + to_toml(v, sub)
+        text += "\n" + to_toml(v, sub, comments)
     return text
 
 
