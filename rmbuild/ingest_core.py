@@ -203,7 +203,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
 
     truth = raw.truth_poses
     if truth is not None:
-        truth = _match_truth(poses, truth, raw)
+        truth = _match_truth(poses, truth, raw, cfg.max_attach_gap_s)
 
     ds = Dataset(
         walks=walks, poses=poses, wifi=wifi, fixes=fixes, truth_poses=truth, truth_aps=raw.truth_aps,
@@ -238,21 +238,30 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     return ds, fp, summary
 
 
-def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput) -> pd.DataFrame:
-    """Reorder true poses to the rows of ``poses`` (matched on walk_id and t_s)."""
+def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_gap_s: float) -> pd.DataFrame:
+    """True poses at the rows of ``poses``: matched on (walk_id, t_s) where the times agree, otherwise
+    interpolated in time along the walk's true track (e.g. steps found by the PDR), clamped to the ends up
+    to ``max_gap_s``; a pose further outside its walk's truth is an error."""
     key = pd.MultiIndex.from_arrays([truth["walk_id"], truth["t_s"]])
     if key.has_duplicates:
         i = _first(key.duplicated())
         raise InputError("truth poses: duplicate (walk_id, t_s)", _where(raw, "truth/poses")(i))
-    idx = key.get_indexer(pd.MultiIndex.from_arrays([poses["walk_id"], poses["t_s"]]))
-    if (idx < 0).any():
-        i = _first(idx < 0)
-        raise InputError(
-            f"truth poses do not cover pose (walk {_v(poses['walk_id'].iloc[i])}, "
-            f"t_s={_v(poses['t_s'].iloc[i])})",
-            "truth/poses",
-        )
-    out = truth.iloc[idx].reset_index(drop=True)
-    out = out[["walk_id", "t_s", "x_m", "y_m", "heading_rad"]].copy()
-    out.insert(1, "step", poses["step"].to_numpy())
-    return out
+    out = pd.DataFrame({"walk_id": poses["walk_id"].to_numpy(), "step": poses["step"].to_numpy(),
+                        "t_s": poses["t_s"].to_numpy(float)})
+    xyh = np.full((len(poses), 3), np.nan)
+    tw = truth["walk_id"].to_numpy()
+    for wid, rows in out.groupby("walk_id", sort=False).indices.items():
+        g = truth[tw == wid].sort_values("t_s")
+        t = out["t_s"].to_numpy()[rows]
+        if len(g) == 0 or (t < g["t_s"].iloc[0] - max_gap_s).any() or (t > g["t_s"].iloc[-1] + max_gap_s).any():
+            i = int(rows[0])
+            raise InputError(
+                f"truth poses do not cover pose (walk {_v(poses['walk_id'].iloc[i])}, "
+                f"t_s={_v(poses['t_s'].iloc[i])})", "truth/poses")
+        tt = g["t_s"].to_numpy(float)
+        xyh[rows, 0] = np.interp(t, tt, g["x_m"].to_numpy(float))
+        xyh[rows, 1] = np.interp(t, tt, g["y_m"].to_numpy(float))
+        h = np.interp(t, tt, np.unwrap(g["heading_rad"].to_numpy(float)))
+        xyh[rows, 2] = np.arctan2(np.sin(h), np.cos(h))
+    out["x_m"], out["y_m"], out["heading_rad"] = xyh[:, 0], xyh[:, 1], xyh[:, 2]
+    return out[["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]]

@@ -17,8 +17,10 @@ from rmbuild.cli.options import common_options, start
               help="File format of the written tables.")
 @click.option("--test-device", default=None, metavar="K,B",
               help="Put the test walks on a device with RSS model k*phi + b (e.g. 1.25,-6).")
+@click.option("--raw-imu", is_flag=True,
+              help="Write raw phone-IMU signals (imu table, 50 Hz) instead of per-step poses: ingest runs the PDR.")
 @common_options
-def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet, verbose):
+def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, config_path, force, quiet, verbose):
     """Write a seeded synthetic venue to OUT_DIR: the files `rmbuild ingest OUT_DIR` reads, plus truth/.
 
     A --config file's [simulate] table is applied on top of the preset (nested tables key by key).
@@ -41,7 +43,7 @@ def simulate(out_dir, preset, seed, fmt, test_device, config_path, force, quiet,
         data.setdefault("devices", {})["test_device"] = [k, b]
         cfg = from_dict(type(cfg), data, "--test-device")
     with progress_display(quiet) as progress:
-        s = stage.run(out_dir, cfg, fmt=fmt, force=force, progress=progress)
+        s = stage.run(out_dir, cfg, fmt=fmt, force=force, progress=progress, raw_imu=raw_imu)
     if not quiet:
         click.echo(f"simulated {s['walks']} walks, {s['steps']} steps, {s['readings']} Wi-Fi readings "
                    f"-> {s['out_dir']}")

@@ -46,8 +46,13 @@ def run(
     fmt: Literal["csv", "parquet"] = "csv",
     force: bool = False,
     progress: Progress | None = None,
+    raw_imu: bool = False,
 ) -> dict:
-    """Simulate and write OUT_DIR (input tables + truth/). Returns a summary dict."""
+    """Simulate and write OUT_DIR (input tables + truth/). Returns a summary dict.
+
+    ``raw_imu``: write each walk's raw phone-IMU signals (``imu``) instead of its dead-reckoned ``poses``,
+    so that ingest derives the steps with the PDR.
+    """
     from rmbuild.synthetic import simulate
 
     progress = ensure_progress(progress)
@@ -64,11 +69,19 @@ def run(
     data = simulate(cfg)
     t_sim = time.perf_counter() - t0
     progress.phase("writing files")
+    imu = None
+    if raw_imu:
+        from rmbuild.synthetic.imu import phone_imu_table
+
+        progress.phase("synthesising phone IMU")
+        imu = phone_imu_table(data.truth_poses, cfg.seed)
     with replacing_dir(out) as tmp:
         for attr, stem in TABLE_FILES.items():
             df = getattr(data, attr, None)
-            if df is not None:
+            if df is not None and not (raw_imu and attr == "poses"):
                 _write_table(df, tmp / stem, fmt)
+        if imu is not None:
+            _write_table(imu, tmp / "imu", fmt)
         (tmp / "truth").mkdir(exist_ok=True)
         (tmp / "truth" / "venue.json").write_text(json.dumps(clean_json(data.venue)) + "\n")
         (tmp / MARKER).write_text(to_toml(cfg, "simulate"))
@@ -80,5 +93,6 @@ def run(
         "scans": int(data.wifi.groupby(["walk_id", "t_s"]).ngroups),
         "aps": len(data.truth_aps) if data.truth_aps is not None else None,
         "fixes": len(data.fixes),
+        "imu_samples": len(imu) if imu is not None else 0,
         "time_s": {"simulate": round(t_sim, 3), "total": round(time.perf_counter() - t0, 3)},
     }

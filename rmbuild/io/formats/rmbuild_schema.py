@@ -21,7 +21,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.errors import InputError
 from rmbuild.io.formats.base import RawInput, Reader, register
 
-TABLES = ("walks", "poses", "wifi", "fixes")
+TABLES = ("walks", "poses", "wifi", "fixes", "imu")
 TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks")
 SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
@@ -38,8 +38,13 @@ SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
     "fixes": ({"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num"}, {"label": "str"}),
     "truth/poses": ({"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num", "heading_rad": "num"}, {}),
 }
+#: raw phone IMU (one row per sample), turned into per-step poses by the PDR (rmbuild/pdr, [pdr] config)
+IMU_REQ = {"walk_id": "str", "t_s": "num", "acc_x_mps2": "num", "acc_y_mps2": "num", "acc_z_mps2": "num"}
+IMU_OPT = {"gyro_x_radps": "num", "gyro_y_radps": "num", "gyro_z_radps": "num", "yaw_abs_rad": "num",
+           "yaw_accuracy": "num"}
 #: optional numeric columns where an empty cell / NaN is allowed (means "not available")
-NULLABLE = {"yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz", "freq_mhz"}
+NULLABLE = {"yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz", "freq_mhz", "gyro_x_radps", "gyro_y_radps",
+            "gyro_z_radps", "yaw_accuracy"}
 ROLES = ("", "map", "test")
 
 
@@ -177,6 +182,18 @@ def _integrate_increments(df: pd.DataFrame) -> pd.DataFrame:
     return out.drop(columns=["step_length_m", "dheading_rad"])
 
 
+def _column(df: pd.DataFrame, name: str, rows: np.ndarray) -> np.ndarray:
+    """float column ``name`` at ``rows``; NaN when the optional column is absent."""
+    return df[name].to_numpy(float)[rows] if name in df.columns else np.full(len(rows), np.nan)
+
+
+class _PdrLocated(_Located):
+    """Poses derived by the PDR: rows are named by the IMU file and step."""
+
+    def where(self, i: int) -> str:
+        return f"{self.path} (PDR step {int(self.df['step'].iloc[i])} of walk {self.df['walk_id'].iloc[i]})"
+
+
 @register
 class RmbuildSchemaReader(Reader):
     name = "rmbuild"
@@ -196,14 +213,16 @@ class RmbuildSchemaReader(Reader):
                 skipped += 1
                 continue
             by_table.setdefault(t, []).append(f)
-        for t in ("poses", "wifi"):
-            if t not in by_table:
-                raise InputError(f"no {t} file among the inputs (expected a file named {t}*.csv or .parquet)")
+        if "wifi" not in by_table:
+            raise InputError("no wifi file among the inputs (expected a file named wifi*.csv or .parquet)")
+        if "poses" not in by_table and "imu" not in by_table:
+            raise InputError("no poses file among the inputs (expected poses*.csv or .parquet, or raw phone "
+                             "IMU in imu*.csv or .parquet)")
         where: dict[str, Callable[[int], str]] = {}
 
         # poses: absolute or increments, one mode per file
         parts = []
-        for f in by_table["poses"]:
+        for f in by_table.get("poses", []):
             loc = _Located(f, _read_file(f))
             cols = set(map(str, loc.df.columns))
             mode = POSE_INC if ("step_length_m" in cols or "dheading_rad" in cols) else POSE_ABS
@@ -212,7 +231,11 @@ class RmbuildSchemaReader(Reader):
             if mode is POSE_INC:
                 loc.df = _integrate_increments(loc.df)
             parts.append(loc)
+        if "imu" in by_table:
+            have_poses = {w for p in parts for w in p.df["walk_id"].unique()}
+            parts.extend(self._poses_from_imu(by_table["imu"], have_poses))
         poses, where["poses"] = _concat(parts)
+        pdr_parts = [p for p in parts if isinstance(p, _PdrLocated)]
 
         tables: dict[str, pd.DataFrame] = {}
         for t in ("wifi", "fixes", "walks", "truth/poses"):
@@ -250,6 +273,12 @@ class RmbuildSchemaReader(Reader):
         )
         if skipped:
             raw.skipped["unrecognised file"] = skipped
+        if pdr_parts:
+            n_steps = sum(len(p.df) - 1 for p in pdr_parts)
+            opts = self.options
+            raw.notes.append(f"PDR on raw IMU: {n_steps:,} steps in {len(pdr_parts)} walks"
+                             + (f" ({opts.step_detector} steps, {opts.heading_source} heading, "
+                                f"{opts.step_length_model} step length)" if opts is not None else ""))
         for t, fs in by_table.items():
             if t == "truth/provenance":
                 continue
@@ -266,3 +295,42 @@ class RmbuildSchemaReader(Reader):
                 else:
                     raw.truth_extra[name] = df
         return raw
+
+    def _poses_from_imu(self, files: list[Path], walks_with_poses: set) -> list[_Located]:
+        """Run the PDR on each walk's raw phone IMU; a walk may have poses or IMU, not both."""
+        from rmbuild.config.pdr import PdrConfig
+        from rmbuild.pdr import ImuSignals, run_pdr
+
+        opts = self.options if isinstance(self.options, PdrConfig) else PdrConfig()
+        out: list[_Located] = []
+        for f in files:
+            loc = _Located(f, _read_file(f))
+            _check_columns(loc, IMU_REQ, IMU_OPT)
+            _coerce(loc, {**IMU_REQ, **IMU_OPT})
+            df = loc.df
+            for wid, rows in df.groupby("walk_id", sort=False).indices.items():
+                if wid in walks_with_poses:
+                    raise InputError(f"walk {wid!r} has both poses and raw IMU; give one of them", loc.where(
+                        int(rows[0])))
+                t = df["t_s"].to_numpy(float)[rows]
+                back = np.flatnonzero(np.diff(t) <= 0)
+                if len(back):
+                    raise InputError(f"imu: time not increasing in walk {wid!r}", loc.where(int(rows[back[0] + 1])))
+
+                acc = np.column_stack([_column(df, f"acc_{c}_mps2", rows) for c in "xyz"])
+                gyro = np.column_stack([_column(df, f"gyro_{c}_radps", rows) for c in "xyz"])
+                g_ok = np.isfinite(gyro).all(axis=1)
+                yaw = _column(df, "yaw_abs_rad", rows)
+                y_ok = np.isfinite(yaw)
+                acc_flag = _column(df, "yaw_accuracy", rows)
+                imu = ImuSignals(
+                    t_acc_s=t, acc_mps2=acc, t_yaw_s=t[y_ok], yaw_abs_rad=yaw[y_ok],
+                    yaw_accuracy=np.nan_to_num(acc_flag[y_ok], nan=-1.0).astype(np.int64),
+                    t_gyro_s=t[g_ok], gyro_radps=gyro[g_ok],
+                )
+                try:
+                    steps = run_pdr(imu, opts)
+                except ValueError as e:
+                    raise InputError(f"PDR failed for walk {wid!r}: {e}", str(f)) from None
+                out.append(_PdrLocated(f, steps.to_frame(str(wid))))
+        return out
