@@ -228,6 +228,31 @@ class SolveConfig:
     # falls back to the initial poses for the whole map (reported in warnings).
     max_odometry_rms_sigma: float = 5.0
     min_extent_ratio: float = 0.8
+    # --- per-walk step-length scale (phone PDR: uncalibrated step length per user) ---
+    # estimate one scale s_w per walk: after a solve, each linked walk's solved path is fitted to its
+    # in-range cross-walk pair partners with a robust scale + translation fit (about the walk's own
+    # positions), s_w is updated (clamped to [scale_min, scale_max], shrunk toward 1 with scale_prior_sigma),
+    # the walk's odometry increments are rescaled by s_w and the graph is solved again (up to
+    # scale_iterations extra solves, until no s_w moves by more than scale_tol). Reported in walks.scale.
+    estimate_scale: bool = False
+    scale_min: float = 0.7
+    scale_max: float = 1.4
+    # 1-sigma of the prior s_w ~ 1 (relative); weighs against the pair fit's own precision.
+    scale_prior_sigma: float = 0.15
+    scale_iterations: int = 8
+    scale_tol: float = 0.005
+    # a walk's scale is fitted only with at least this many in-range cross pairs spread over at least
+    # scale_min_span_m of its solved path (extent of the paired nodes); otherwise s_w stays.
+    scale_min_pairs: int = 20
+    scale_min_span_m: float = 15.0
+    # m; cross pairs of the pool within this distance at the current solution feed the fit (0 = d_max, the
+    # pairs of the solve).
+    scale_pair_gate_m: float = 0.0
+    # m; Cauchy scale of the robust (IRLS) fit of pair residuals.
+    scale_robust_m: float = 3.0
+    # rescale all fitted s_w so their median is 1 when no anchors fix the map scale
+    # (Wi-Fi vicinity factors alone cannot observe the map's overall scale).
+    scale_normalize: bool = True
 
     def validate(self) -> None:
         if self.max_iterations < 1 or self.outer_iterations < 1 or self.heading_prior_every_n < 0:
@@ -238,6 +263,10 @@ class SolveConfig:
             raise ValueError("solve.anchor_max_gap_s must be >= 0")
         if self.gauge_sigma_m <= 0 or self.gauge_sigma_rad <= 0 or self.anchor_sigma_m <= 0:
             raise ValueError("gauge and anchor sigmas must be > 0")
+        if not 0 < self.scale_min <= 1 <= self.scale_max or self.scale_prior_sigma <= 0:
+            raise ValueError("need 0 < scale_min <= 1 <= scale_max and scale_prior_sigma > 0")
+        if self.scale_iterations < 0 or self.scale_tol < 0 or self.scale_min_pairs < 3 or self.scale_robust_m <= 0:
+            raise ValueError("scale_iterations >= 0, scale_tol >= 0, scale_min_pairs >= 3, scale_robust_m > 0")
 
 
 @dataclass(frozen=True)

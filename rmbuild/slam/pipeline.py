@@ -40,6 +40,7 @@ from rmbuild.slam.grow import grow, grow_knn
 from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
 from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix
+from rmbuild.slam.scale import scaled_raw, update_scales
 from rmbuild.types import Dataset, Fingerprints
 
 log = logging.getLogger(__name__)
@@ -304,7 +305,12 @@ def optimize(
 
     # ------------------------------------------------------------------ static factors
     static = gtsam.NonlinearFactorGraph()
-    n_odo = add_odometry(static, raw, starts[keep_walk], ends[keep_walk], cfg.odometry)
+    # odometry factors are built per solve from the scaled PDR (per-walk step-length scale, all 1 unless
+    # cfg.solve.estimate_scale)
+    scale = np.ones(n_walks)
+    raw_s = raw
+    odo_graph = gtsam.NonlinearFactorGraph()
+    n_odo = add_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], cfg.odometry)
     n_prior = 0
     ref = init.reference
     every = cfg.solve.heading_prior_every_n
@@ -371,8 +377,13 @@ def optimize(
     initial_cost = None
     n_vic_used = 0
     outer_done = 0
-    for outer in range(cfg.solve.outer_iterations):
-        graph = gtsam.NonlinearFactorGraph(static)
+    est_scale = cfg.solve.estimate_scale and not paper
+    n_solves = cfg.solve.outer_iterations + (cfg.solve.scale_iterations if est_scale else 0)
+    scale_rounds = 0
+    scale_fitted = np.zeros(n_walks, bool)
+    for outer in range(n_solves):
+        graph = gtsam.NonlinearFactorGraph(odo_graph)
+        graph.push_back(static)
         sel = np.flatnonzero(active_pairs)
         for k, q in zip(pk[sel].tolist(), pq[sel].tolist()):
             graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
@@ -386,7 +397,32 @@ def optimize(
         current = values_to_poses(values, n)
         d_now = np.hypot(*(current[pk, :2] - current[pq, :2]).T)
         new_active = d_now < cfg.vicinity.d_max
-        if paper or np.array_equal(new_active, active_pairs) or outer == cfg.solve.outer_iterations - 1:
+        last = outer == n_solves - 1
+        scale_moved = False
+        if est_scale and not last and scale_rounds < cfg.solve.scale_iterations:
+            eligible = keep_walk & init.linked
+            sgate = cfg.solve.scale_pair_gate_m or cfg.vicinity.d_max
+            near = d_now < sgate
+            new_scale, fitted = update_scales(current, raw, starts, ends, scale, eligible, pk[near],
+                                              pq[near], walk_of, cfg.solve,
+                                              cfg.solve.scale_normalize and not len(anchor_nodes))
+            scale_fitted |= fitted
+            scale_rounds += 1
+            scale_moved = bool(np.max(np.abs(new_scale - scale), initial=0.0) > cfg.solve.scale_tol)
+            log.debug("scale round %d: %s", scale_rounds, np.round(new_scale, 3).tolist())
+            if scale_moved:
+                # start the next solve from the current poses stretched about each walk's centroid
+                moved = current.copy()
+                for w in np.flatnonzero(new_scale != scale):
+                    a, b = starts[w], ends[w]
+                    c = current[a:b, :2].mean(axis=0)
+                    moved[a:b, :2] = c + (new_scale[w] / scale[w]) * (current[a:b, :2] - c)
+                scale = new_scale
+                raw_s = scaled_raw(raw, starts, ends, scale)
+                odo_graph = gtsam.NonlinearFactorGraph()
+                add_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], cfg.odometry)
+                values = poses_to_values(moved)
+        if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved):
             break
         active_pairs = new_active
     # the last solve's pairs are "the vicinity factors finally used"
@@ -394,7 +430,8 @@ def optimize(
     use[pool_idx[active_pairs]] = True
     cand["used"] = use
     pk, pq = nk_all[use], nq_all[use]
-    final_graph = gtsam.NonlinearFactorGraph(static)
+    final_graph = gtsam.NonlinearFactorGraph(odo_graph)
+    final_graph.push_back(static)
     for k, q in zip(pk.tolist(), pq.tolist()):
         final_graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
     final_cost = float(final_graph.error(values))
@@ -408,10 +445,10 @@ def optimize(
     extent_ratio = np.full(n_walks, np.nan)
     for w in np.flatnonzero(keep_walk):
         s, e = starts[w], ends[w]
-        du = relative_se2(current[s:e]) - relative_se2(raw[s:e])
+        du = relative_se2(current[s:e]) - relative_se2(raw_s[s:e])
         du[:, 2] = np.angle(np.exp(1j * du[:, 2]))
         odo_res.append(du / sig)
-        er = _extent(raw[s:e, :2])
+        er = _extent(raw_s[s:e, :2])
         extent_ratio[w] = _extent(current[s:e, :2]) / er if er > 0 else 1.0
     odo_rms = float(np.sqrt(np.mean(np.concatenate(odo_res) ** 2))) if odo_res else 0.0
     rejected = False
@@ -445,6 +482,8 @@ def optimize(
         "injected": used["injected"].to_numpy(),
     })
     walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio, cfg)
+    walks_df["scale"] = scale
+    walks_df["scale_fitted"] = scale_fitted
     for w in np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy()):
         warnings.append(f"walk {walk_ids[w]} is not linked to the reference walk {walk_ids[ref]} "
                         f"(component {int(init.component[w])}): its placement is not constrained by Wi-Fi")
@@ -468,6 +507,8 @@ def optimize(
         "iterations": iterations, "outer_iterations": outer_done, "ordering": ordering, "cost_history": cost_history,
         "odometry_residual_rms_sigma": odo_rms, "median_extent_ratio": float(np.nanmedian(extent_ratio)),
         "rejected": rejected, "time_s": timing, "warnings": warnings,
+        "scale": {"estimated": bool(est_scale), "rounds": scale_rounds, "fitted_walks": int(scale_fitted.sum()),
+                  "min": float(scale.min()) if n_walks else 1.0, "max": float(scale.max()) if n_walks else 1.0},
     }
     return OptimizeResult(
         poses=_poses_df(dataset, current), initial_poses=_poses_df(dataset, init_xyt), pairs=pairs,
