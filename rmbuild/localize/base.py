@@ -191,6 +191,16 @@ class Localizer(Protocol):
         ...
 
 
+def checked(cfg, default_cls: type):
+    """``cfg`` (or ``default_cls()``), validated: a bad value is a one-line :class:`InputError`."""
+    cfg = cfg or default_cls()
+    try:
+        cfg.validate()
+    except ValueError as e:
+        raise InputError(f"config: {e}") from None
+    return cfg
+
+
 def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> ReferenceSet:
     """A :class:`ReferenceSet` from a RadioMap (its ``kind`` view: "cells" or "nodes") or as is."""
     if isinstance(ref, ReferenceSet):

@@ -19,7 +19,7 @@ import numpy as np
 
 from rmbuild.config.localize import BayesConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
 from rmbuild.localize.slac import sub_config
 
 _BLOCK = 512
@@ -31,11 +31,7 @@ class NaiveBayesLocalizer:
     name: ClassVar[str] = "nb"
 
     def __init__(self, cfg: BayesConfig | None = None) -> None:
-        self.cfg = cfg or BayesConfig()
-        try:
-            self.cfg.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
+        self.cfg = checked(cfg, BayesConfig)
         self.ref: ReferenceSet | None = None
 
     @classmethod

@@ -19,8 +19,7 @@ import pandas as pd
 
 from rmbuild.config.evaluate import KnnConfig
 from rmbuild.config.localize import PflConfig
-from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, as_reference
+from rmbuild.localize.base import Query, as_reference, checked
 from rmbuild.localize.knn import KnnLocalizer
 from rmbuild.localize.slac import sub_config
 
@@ -31,11 +30,7 @@ class PflLocalizer:
     name: ClassVar[str] = "pfl"
 
     def __init__(self, cfg: PflConfig | None = None, knn: KnnConfig | None = None) -> None:
-        self.cfg = cfg or PflConfig()
-        try:
-            self.cfg.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
+        self.cfg = checked(cfg, PflConfig)
         base = knn or KnnConfig()
         self.knn = KnnLocalizer(KnnConfig(**{**base.__dict__, "k": self.cfg.knn_k}))
         self.diagnostics: dict[str, dict] = {}

@@ -42,7 +42,7 @@ import pandas as pd
 
 from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
 
 log = logging.getLogger(__name__)
 
@@ -202,11 +202,7 @@ class SlacLocalizer:
     name: ClassVar[str] = "slac"
 
     def __init__(self, cfg: SlacConfig | None = None) -> None:
-        self.cfg = cfg or SlacConfig()
-        try:
-            self.cfg.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
+        self.cfg = checked(cfg, SlacConfig)
         self.ref: ReferenceSet | None = None
         self.diagnostics: dict[str, SlacWalkResult] = {}
         self.map_fallbacks: list[str] = []

@@ -18,8 +18,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.localize import SmoothingConfig
-from rmbuild.errors import InputError
-from rmbuild.localize.base import Query
+from rmbuild.localize.base import Query, checked
 from rmbuild.localize.slac import sub_config
 
 
@@ -95,11 +94,7 @@ class KalmanSmoothed:
 
     def __init__(self, base, cfg: SmoothingConfig | None = None) -> None:
         self.base = base
-        self.cfg = cfg or SmoothingConfig()
-        try:
-            self.cfg.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
+        self.cfg = checked(cfg, SmoothingConfig)
         self.diagnostics: dict[str, dict] = {}
 
     @classmethod

@@ -19,7 +19,7 @@ import numpy as np
 
 from rmbuild.config.localize import SsdConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
 from rmbuild.localize.slac import sub_config
 
 _BLOCK = 512
@@ -31,11 +31,7 @@ class SsdLocalizer:
     name: ClassVar[str] = "ssd"
 
     def __init__(self, cfg: SsdConfig | None = None) -> None:
-        self.cfg = cfg or SsdConfig()
-        try:
-            self.cfg.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
+        self.cfg = checked(cfg, SsdConfig)
         self.ref: ReferenceSet | None = None
 
     @classmethod

@@ -24,11 +24,12 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
+from rmbuild.config.pdr import PdrConfig
 
 
 @dataclass
@@ -61,9 +62,9 @@ class Reader(ABC):
     name: ClassVar[str]
     description: ClassVar[str]
 
-    def __init__(self, options: Any = None) -> None:
-        """``options``: the format's own config (e.g. :class:`rmbuild.config.pdr.PdrConfig`), or None."""
-        self.options = options
+    def __init__(self, options: PdrConfig | None = None) -> None:
+        """``options``: the ``[pdr]`` config (phone PDR and format specifics); defaults when None."""
+        self.options = options if options is not None else PdrConfig()
 
     @classmethod
     @abstractmethod

@@ -246,9 +246,6 @@ class IpinReader(Reader):
     name = FORMAT_NAME
     description = "IPIN / GetSensorData logfiles (';'-separated): phone IMU or foot IMU (IMUI), Wi-Fi, POSI"
 
-    def __init__(self, options: PdrConfig | None = None) -> None:
-        self.options = options if options is not None else PdrConfig()
-
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
         if not files:

@@ -373,9 +373,6 @@ class MsftIlcReader(Reader):
     name = FORMAT_NAME
     description = "Microsoft Indoor Location Competition 2.0 traces (.txt/.txt.gz): phone IMU + Wi-Fi, PDR"
 
-    def __init__(self, options: PdrConfig | None = None) -> None:
-        self.options = options if options is not None else PdrConfig()
-
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
         traces = [f for f in files if f.name not in COMPANION_FILES]

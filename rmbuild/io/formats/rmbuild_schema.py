@@ -276,9 +276,8 @@ class RmbuildSchemaReader(Reader):
         if pdr_parts:
             n_steps = sum(len(p.df) - 1 for p in pdr_parts)
             opts = self.options
-            raw.notes.append(f"PDR on raw IMU: {n_steps:,} steps in {len(pdr_parts)} walks"
-                             + (f" ({opts.step_detector} steps, {opts.heading_source} heading, "
-                                f"{opts.step_length_model} step length)" if opts is not None else ""))
+            raw.notes.append(f"PDR on raw IMU: {n_steps:,} steps in {len(pdr_parts)} walks ({opts.step_detector} "
+                             f"steps, {opts.heading_source} heading, {opts.step_length_model} step length)")
         for t, fs in by_table.items():
             if t == "truth/provenance":
                 continue
@@ -298,10 +297,9 @@ class RmbuildSchemaReader(Reader):
 
     def _poses_from_imu(self, files: list[Path], walks_with_poses: set) -> list[_Located]:
         """Run the PDR on each walk's raw phone IMU; a walk may have poses or IMU, not both."""
-        from rmbuild.config.pdr import PdrConfig
         from rmbuild.pdr import ImuSignals, run_pdr
 
-        opts = self.options if isinstance(self.options, PdrConfig) else PdrConfig()
+        opts = self.options
         out: list[_Located] = []
         for f in files:
             loc = _Located(f, _read_file(f))
