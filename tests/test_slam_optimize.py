@@ -108,6 +108,35 @@ def test_single_step_walk_and_disconnected(venue):
     assert any("disconnected" in w for w in r.stats["warnings"])
 
 
+
+def test_unlinked_walks_reported_in_one_line(venue):
+    """Walks without any scan cannot be linked: one warning names how many, walks.linked says which."""
+    ds, fp = venue
+    walk_of = ds.walk_index()
+    gone = np.isin(walk_of[fp.node], [1, 2, 3])
+    r = optimize(ds, fp.subset(~gone), OptimizeConfig())
+    msgs = [w for w in r.stats["warnings"] if "not linked" in w]
+    assert len(msgs) == 1 and msgs[0].startswith("3 of ")
+    linked = dict(zip(r.walks["walk_id"], r.walks["linked"]))
+    assert [w for w, ok in linked.items() if not ok] == ["w001", "w002", "w003"]
+
+
+def test_graduated_kernel_widens_then_narrows(venue, result):
+    """solve.gnc_factors: a widened first solve (more pairs admitted) then the d_max solves; still accurate."""
+    ds, fp = venue
+    cfg = OptimizeConfig()
+    cfg = dataclasses.replace(cfg, solve=dataclasses.replace(cfg.solve, gnc_factors=(3.0,)))
+    solves = []
+    r = optimize(ds, fp, cfg, progress=lambda phase, info: solves.append(info["outer"]) if phase == "solve" else None)
+    assert len(set(solves)) >= 2 and min(solves) == 0
+    # the last solve's pairs are all within d_max (the narrowed band), as without the option
+    assert (r.pairs["final_dist_m"] < cfg.vicinity.d_max).mean() > 0.9
+    gnc_lm = trajectory_metrics(r.poses, ds)["landmark_error_m"]["mean"]
+    base_lm = trajectory_metrics(result[0].poses, ds)["landmark_error_m"]["mean"]
+    assert gnc_lm < max(1.5 * base_lm, 1.5), (gnc_lm, base_lm)
+    with pytest.raises(ValueError, match="gnc_factors"):
+        dataclasses.replace(cfg.solve, gnc_factors=(0.5,)).validate()
+
 def test_false_pair_robustness_small_venue():
     """30 % of the vicinity candidates replaced by random cross-walk pairs: landmark error within 1.5x."""
     ds, fp = make_venue(n_walks=8, steps_per_walk=200, seed=4)

@@ -282,8 +282,11 @@ def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: PairConfig) -> pd.D
             for jj in range(r, r + s):
                 for dr in (1, -1):
                     vals = np.stack([D[:, ii + o, jj + dr * o] for o in range(-r, r + 1)], axis=1)
-                    m = np.nanmean(vals, axis=1) if r > 0 else vals[:, 0]
                     nvalid = np.sum(~np.isnan(vals), axis=1)
+                    if r > 0:  # nan-mean without numpy's all-NaN-row warning
+                        m = np.where(nvalid > 0, np.nansum(vals, axis=1) / np.maximum(nvalid, 1), np.nan)
+                    else:
+                        m = vals[:, 0]
                     m = np.where((nvalid >= r + 1) & ~np.isnan(D[:, ii, jj]), m, np.inf)
                     better = m < best
                     best[better] = m[better]

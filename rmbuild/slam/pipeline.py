@@ -18,7 +18,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -301,6 +301,21 @@ def optimize(
             first |= ok_within
     cand["init_dist_m"] = d_init
     pool_idx = np.flatnonzero(pool)
+    # graduated kernel (solve.gnc_factors): pairs touching a walk long enough to drift get a widened band
+    # in the first solves; every other pair keeps d_max throughout
+    gnc = () if paper else tuple(cfg.solve.gnc_factors)
+    walk_len = np.zeros(n_walks)
+    np.maximum.at(walk_len, walk_of, path)
+    widen = (walk_len[walk_of[nk_all]] >= cfg.solve.gnc_min_walk_m) | (walk_len[walk_of[nq_all]] >=
+                                                                          cfg.solve.gnc_min_walk_m)
+    vc = cfg.vicinity
+
+    def band(f: float) -> np.ndarray:
+        """Per pool pair: the band's outer edge (m) in a solve widened by f."""
+        return vc.d_min + np.where(widen[pool_idx], f, 1.0) * (vc.d_max - vc.d_min)
+
+    if gnc:
+        first[pool_idx] |= pool[pool_idx] & (d_init[pool_idx] < band(gnc[0]))
     pk, pq = nk_all[pool_idx], nq_all[pool_idx]
 
     # ------------------------------------------------------------------ static factors
@@ -378,15 +393,20 @@ def optimize(
     n_vic_used = 0
     outer_done = 0
     est_scale = cfg.solve.estimate_scale and not paper
-    n_solves = cfg.solve.outer_iterations + (cfg.solve.scale_iterations if est_scale else 0)
+    n_solves = len(gnc) + cfg.solve.outer_iterations + (cfg.solve.scale_iterations if est_scale else 0)
     scale_rounds = 0
     scale_fitted = np.zeros(n_walks, bool)
     for outer in range(n_solves):
+        # graduated kernel: widened band (same slope) for the first len(gnc) solves, long-walk pairs only
+        f_band = gnc[outer] if outer < len(gnc) else 1.0
+        wide_cfg = replace(vc, d_max=vc.d_min + f_band * (vc.d_max - vc.d_min), e_max=f_band * vc.e_max)
+        wide_noise = vnoise if f_band == 1.0 or vnoise is None else vicinity_noise(wide_cfg)
         graph = gtsam.NonlinearFactorGraph(odo_graph)
         graph.push_back(static)
         sel = np.flatnonzero(active_pairs)
-        for k, q in zip(pk[sel].tolist(), pq[sel].tolist()):
-            graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
+        wide_sel = widen[pool_idx[sel]] & (f_band != 1.0)
+        for k, q, wd in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist()):
+            graph.add(vicinity_factor(k, q, wide_cfg, wide_noise) if wd else vicinity_factor(k, q, vc, vnoise))
         if initial_cost is None:
             initial_cost = float(graph.error(values))
             cost_history.append(initial_cost)
@@ -396,8 +416,10 @@ def optimize(
         n_vic_used = len(sel)
         current = values_to_poses(values, n)
         d_now = np.hypot(*(current[pk, :2] - current[pq, :2]).T)
-        new_active = d_now < cfg.vicinity.d_max
+        f_next = gnc[outer + 1] if outer + 1 < len(gnc) else 1.0
+        new_active = d_now < band(f_next)
         last = outer == n_solves - 1
+        in_gnc = outer < len(gnc)  # a widened solve is always followed by the next one
         scale_moved = False
         if est_scale and not last and scale_rounds < cfg.solve.scale_iterations:
             eligible = keep_walk & init.linked
@@ -422,7 +444,7 @@ def optimize(
                 odo_graph = gtsam.NonlinearFactorGraph()
                 add_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], cfg.odometry)
                 values = poses_to_values(moved)
-        if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved):
+        if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved and not in_gnc):
             break
         active_pairs = new_active
     # the last solve's pairs are "the vicinity factors finally used"
@@ -484,9 +506,13 @@ def optimize(
     walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio, cfg)
     walks_df["scale"] = scale
     walks_df["scale_fitted"] = scale_fitted
-    for w in np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy()):
-        warnings.append(f"walk {walk_ids[w]} is not linked to the reference walk {walk_ids[ref]} "
-                        f"(component {int(init.component[w])}): its placement is not constrained by Wi-Fi")
+    unlinked = np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy())
+    if len(unlinked):
+        # one line however many walks (a 100-walk floor can leave dozens): the full list is optimize/walks
+        names = ", ".join(walk_ids[w] for w in unlinked[:5]) + (", ..." if len(unlinked) > 5 else "")
+        warnings.append(f"{len(unlinked)} of {int(keep_walk.sum())} walk(s) not linked to the reference walk "
+                        f"{walk_ids[ref]} ({names}): their placement is not constrained by Wi-Fi "
+                        "(optimize/walks.parquet: linked, component)")
     if n_walks > 1 and walks_df["linked"].sum() <= 1:
         warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
     for wmsg in warnings:
