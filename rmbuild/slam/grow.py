@@ -132,6 +132,29 @@ class WalkFit:
     span_m: float = 0.0  # walked path between the first and the last inlier scan of the walk
 
 
+def _se2_two_point_hypotheses(p_map: np.ndarray, p_walk: np.ndarray, gate: float, n: int,
+                              rng: np.random.Generator):
+    """SE(2) hypotheses walk -> map from ``n`` random point pairs (both spans > 2 gates).
+
+    Returns (theta, t, px, py): per hypothesis the rotation, translation and every walk point mapped by it
+    (px, py: hypotheses x points), or None when no sampled pair spans enough.
+    """
+    m = len(p_map)
+    i1, i2 = rng.integers(0, m, n), rng.integers(0, m, n)
+    va, vb = p_map[i2] - p_map[i1], p_walk[i2] - p_walk[i1]
+    ok = (np.linalg.norm(va, axis=1) > 2 * gate) & (np.linalg.norm(vb, axis=1) > 2 * gate)
+    if not ok.any():
+        return None
+    i1, i2, va, vb = i1[ok], i2[ok], va[ok], vb[ok]
+    ths = np.arctan2(va[:, 1], va[:, 0]) - np.arctan2(vb[:, 1], vb[:, 0])
+    c, s = np.cos(ths), np.sin(ths)
+    mb, ma = (p_walk[i1] + p_walk[i2]) / 2, (p_map[i1] + p_map[i2]) / 2
+    ts = ma - np.c_[c * mb[:, 0] - s * mb[:, 1], s * mb[:, 0] + c * mb[:, 1]]
+    px = c[:, None] * p_walk[None, :, 0] - s[:, None] * p_walk[None, :, 1] + ts[:, 0:1]
+    py = s[:, None] * p_walk[None, :, 0] + c[:, None] * p_walk[None, :, 1] + ts[:, 1:2]
+    return ths, ts, px, py
+
+
 def _score(inl: np.ndarray, wnode_idx: np.ndarray, n_u: int) -> np.ndarray:
     """Distinct walk nodes among each row's inliers: inl (h, m) bool -> (h,) counts."""
     onehot = np.zeros((inl.shape[1], n_u), np.float32)
@@ -166,19 +189,10 @@ def fit_walk_to_map(pm: np.ndarray, pw: np.ndarray, wnode: np.ndarray, wpath: np
     else:
         if m < 2:
             return None
-        n_h = icfg.ransac_iterations
-        i1, i2 = rng.integers(0, m, n_h), rng.integers(0, m, n_h)
-        va, vb = pm[i2] - pm[i1], pw[i2] - pw[i1]
-        ok = (np.linalg.norm(va, axis=1) > 2 * gate) & (np.linalg.norm(vb, axis=1) > 2 * gate)
-        if not ok.any():
+        hyp = _se2_two_point_hypotheses(pm, pw, gate, icfg.ransac_iterations, rng)
+        if hyp is None:
             return None
-        i1, i2, va, vb = i1[ok], i2[ok], va[ok], vb[ok]
-        ths = np.arctan2(va[:, 1], va[:, 0]) - np.arctan2(vb[:, 1], vb[:, 0])
-        c, s = np.cos(ths), np.sin(ths)
-        mb, ma = (pw[i1] + pw[i2]) / 2, (pm[i1] + pm[i2]) / 2
-        ts = ma - np.c_[c * mb[:, 0] - s * mb[:, 1], s * mb[:, 0] + c * mb[:, 1]]
-        px = c[:, None] * pw[None, :, 0] - s[:, None] * pw[None, :, 1] + ts[:, 0:1]
-        py = s[:, None] * pw[None, :, 0] + c[:, None] * pw[None, :, 1] + ts[:, 1:2]
+        ths, ts, px, py = hyp
         inl = np.hypot(px - pm[None, :, 0], py - pm[None, :, 1]) < gate
         score = _score(inl, widx, n_u)
         h = int(np.argmax(score))
@@ -406,18 +420,10 @@ def _fit_offsets(p_own: np.ndarray, x_hat: np.ndarray, path: np.ndarray, rot: fl
     else:
         if m < 2:
             return None
-        i1, i2 = rng.integers(0, m, icfg.ransac_iterations), rng.integers(0, m, icfg.ransac_iterations)
-        va, vb = x_hat[i2] - x_hat[i1], p_own[i2] - p_own[i1]
-        ok = (np.linalg.norm(va, axis=1) > 2 * gate) & (np.linalg.norm(vb, axis=1) > 2 * gate)
-        if not ok.any():
+        hyp = _se2_two_point_hypotheses(x_hat, p_own, gate, icfg.ransac_iterations, rng)
+        if hyp is None:
             return None
-        i1, i2, va, vb = i1[ok], i2[ok], va[ok], vb[ok]
-        ths = np.arctan2(va[:, 1], va[:, 0]) - np.arctan2(vb[:, 1], vb[:, 0])
-        c, s = np.cos(ths), np.sin(ths)
-        mb, ma = (p_own[i1] + p_own[i2]) / 2, (x_hat[i1] + x_hat[i2]) / 2
-        ts = ma - np.c_[c * mb[:, 0] - s * mb[:, 1], s * mb[:, 0] + c * mb[:, 1]]
-        px = c[:, None] * p_own[None, :, 0] - s[:, None] * p_own[None, :, 1] + ts[:, 0:1]
-        py = s[:, None] * p_own[None, :, 0] + c[:, None] * p_own[None, :, 1] + ts[:, 1:2]
+        ths, ts, px, py = hyp
         cnt = (np.hypot(px - x_hat[None, :, 0], py - x_hat[None, :, 1]) < gate).sum(axis=1)
         h = int(np.argmax(cnt))
         th, t = float(ths[h]), ts[h]
