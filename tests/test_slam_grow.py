@@ -108,3 +108,50 @@ def test_accept_spread_and_untrusted_se2_path():
     assert np.allclose(wl, [60.0, 2.0, 0.0])
     with pytest.raises(ValueError):
         InitConfig(grow_min_span_frac=1.5).validate()
+
+
+def _merge_case(consistent: bool):
+    """Reference walk 0 (comp 0) along y = 0; walks 1 and 2 (comp 1, placed against each other) each meet
+    it with 4 candidate pairs 3 m apart: too few for a walk alone (grow_min_inliers_se2 = 6), enough pooled."""
+    from rmbuild.slam.grow import GrowResult
+
+    ref = np.c_[np.arange(0, 61.0), np.zeros(61), np.zeros(61)]
+    own = np.c_[np.arange(0, 21.0), np.zeros(21), np.zeros(21)]
+    raw = np.vstack([ref, own, own])
+    walk_of = np.repeat([0, 1, 2], [61, 21, 21])
+    path = np.r_[ref[:, 0], own[:, 0], own[:, 0]]
+    true_T = np.array([[0, 0, 0], [5, 0, 0], [35, 0, 0]], float)  # pairs join coincident nodes
+    world = world_xy(raw, true_T, walk_of, np.arange(len(raw)))
+    nk, nq = [], []
+    for w in (1, 2):
+        for s in (2, 6, 10, 14):
+            node = 61 + 21 * (w - 1) + s
+            nk.append(int(np.argmin(np.linalg.norm(world[:61] - world[node, :2], axis=1))))
+            nq.append(node)
+    nk, nq = np.array(nk), np.array(nq)
+    if not consistent:
+        nk = np.random.default_rng(0).permutation(nk)
+    # comp 1's own frame: walk 1 at the origin, walk 2 where it truly is relative to walk 1
+    T = np.zeros((3, 3))
+    rel = true_T[2] - true_T[1]
+    c, s = np.cos(-true_T[1, 2]), np.sin(-true_T[1, 2])
+    T[2] = [c * rel[0] - s * rel[1], s * rel[0] + c * rel[1], rel[2]]
+    g = GrowResult(T, np.array([0, 1, 1]), 0, np.array([0, 0, 1]), np.zeros(3, np.int64), np.zeros(3),
+                   np.array(["seed", "seed", "se2"], dtype=object), np.zeros(3, bool))
+    return g, raw, path, walk_of, nk, nq, true_T
+
+
+@pytest.mark.parametrize("consistent", [True, False])
+def test_merge_components_pools_a_groups_pairs(consistent):
+    from rmbuild.slam.grow import merge_components
+
+    g, raw, path, walk_of, nk, nq, true_T = _merge_case(consistent)
+    icfg = InitConfig()
+    no = np.zeros(3, bool)
+    out = merge_components(g, raw, path, walk_of, nk, nq, np.zeros(3), no, np.full(3, np.inf), icfg)
+    if consistent:
+        assert (out.component == 0).all()
+        assert np.abs(out.world_T_walk[:, :2] - true_T[:, :2]).max() < 0.3
+        assert np.abs(out.world_T_walk[:, 2] - true_T[:, 2]).max() < 0.01
+    else:  # pairs that disagree with any rigid placement: the group stays apart
+        assert (out.component == np.array([0, 1, 1])).all()

@@ -169,6 +169,9 @@ class InitConfig:
     # also place a walk through an accepted walk-pair RANSAC fit (method "ransac"'s rule: min_inliers,
     # min_inlier_ratio, min_shared_path_m) to an already placed walk when its walk-to-map fit fails.
     grow_pair_edges: bool = True
+    # after growth, fit each component of >= 2 walks that is not linked to the reference's map rigidly to
+    # that map from the pooled candidate pairs of its walks (same acceptance rules as a single walk's fit).
+    merge_components: bool = True
     # walk-level refinement: m, 1-sigma of a pair's position difference; Cauchy scale in sigmas; Gauss-
     # Newton iterations; pairs within refine_gate_factor * grow_gate_m of each other are used.
     pair_sigma_m: float = 3.0

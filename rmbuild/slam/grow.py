@@ -611,3 +611,83 @@ def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: in
     lk = np.concatenate(link_k) if link_k else np.zeros(0, np.int64)
     lq = np.concatenate(link_q) if link_q else np.zeros(0, np.int64)
     return GrowResult(T, comp, reference, rnd, n_inl, shared, method, heading_used), lk, lq
+
+
+# ------------------------------------------------------------------------------------- component merging
+def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, nk: np.ndarray,
+                     nq: np.ndarray, rot_abs: np.ndarray, rot_known: np.ndarray, rot_sig: np.ndarray,
+                     icfg: InitConfig, trace: list | None = None) -> GrowResult:
+    """Fit whole secondary components (groups of walks placed against each other but not against the
+    reference's map) rigidly to component 0, largest first, until none is accepted.
+
+    A component of several short walks pools their candidate pairs to the map: each walk alone may lack the
+    shared path a fit needs while the group has it. The fit is :func:`fit_walk_to_map` with the component's
+    own frame as the "walk" frame (translation-only when the magnetometer gives the component's rotation,
+    SE(2) otherwise) and the same acceptance rules; shared path is summed over the component's walks.
+    Single-walk components are not retried (the walk-to-map growth already failed them).
+    """
+    rng = np.random.default_rng(icfg.seed + 1)
+    T, comp = g.world_T_walk.copy(), g.component.copy()
+    heading_used = g.heading_used.copy()
+    method = g.method.copy()
+    ref = g.reference
+    wk, wq = walk_of[nk], walk_of[nq]
+    n_walks = len(T)
+    walk_len = np.zeros(n_walks)
+    np.maximum.at(walk_len, walk_of, path)
+    merged_any = False
+    while True:
+        placed = comp == 0
+        sizes = np.bincount(comp, minlength=int(comp.max()) + 1)
+        order = [c for c in np.argsort(-sizes, kind="stable") if c > 0 and sizes[c] >= 2]
+        done = False
+        for c in order:
+            members = comp == c
+            m = (placed[wk] & members[wq]) | (placed[wq] & members[wk])
+            if m.sum() < icfg.grow_min_inliers:
+                continue
+            rows = np.flatnonzero(m)
+            mnode = np.where(placed[wk[rows]], nk[rows], nq[rows])
+            cnode = np.where(placed[wk[rows]], nq[rows], nk[rows])
+            pm = world_xy(raw, T, walk_of, mnode)
+            pc = world_xy(raw, T, walk_of, cnode)
+            # walked distance made distinct per walk so covered_m sums the component's walks
+            cpath = path[cnode] + walk_of[cnode] * (np.ceil(walk_len.max()) + 10.0)
+            prior = np.nan
+            hm = members & heading_used & rot_known
+            if rot_known[ref] and hm.any():
+                prior = float(np.angle(np.mean(np.exp(1j * (rot_abs[hm] - rot_abs[ref] - T[hm, 2])))))
+            f, ok = None, False
+            if np.isfinite(prior):
+                f = fit_walk_to_map(pm, pc, cnode, cpath, walk_of[mnode], prior, icfg, rng)
+                ok = _accept(f, icfg, se2=False)
+            if not ok:
+                f2 = fit_walk_to_map(pm, pc, cnode, cpath, walk_of[mnode], None, icfg, rng)
+                if _accept(f2, icfg, se2=True, untrusted=not np.isfinite(prior)):
+                    f, ok = f2, True
+            if trace is not None:
+                trace.append({"phase": "merge", "component": int(c), "walks": int(members.sum()),
+                              "accepted": bool(ok), "score": f.score if f else 0, "second": f.second if f else 0,
+                              "shared_m": f.shared_m if f else 0.0, "method": f.method if f else "",
+                              "pairs": len(rows), "T": None if f is None else f.t.tolist()})
+            if not ok:
+                continue
+            for w in np.flatnonzero(members):
+                T[w] = _compose(f.t, T[w])
+            comp[members] = 0
+            method[members] = np.where(method[members] == "seed", "merge", method[members])
+            if f.method == "se2":
+                heading_used[members] = False
+            done = merged_any = True
+            break  # the map grew: recompute sizes and pairs
+        if not done:
+            break
+    if not merged_any:
+        return g
+    placed = comp == 0
+    prior_all = np.where(rot_known, _wrap(rot_abs - rot_abs[ref]), np.nan) if rot_known[ref] else np.full(n_walks,
+                                                                                                        np.nan)
+    T = _refine_placed(T, placed, nk, nq, raw, walk_of, ref, prior_all, heading_used, rot_sig, icfg)
+    # renumber the remaining components 1, 2, ... in their old order
+    _, comp = np.unique(comp, return_inverse=True)
+    return GrowResult(T, comp, ref, g.round_placed, g.n_inliers, g.shared_m, method, heading_used)

@@ -36,7 +36,7 @@ from rmbuild.slam.factors import (
     vicinity_factor,
     vicinity_noise,
 )
-from rmbuild.slam.grow import grow, grow_knn
+from rmbuild.slam.grow import grow, grow_knn, merge_components
 from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
 from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix
@@ -571,6 +571,10 @@ def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, a
         g, lk, lq = grow_knn(raw, path, walk_of, n_walks, rm, row_node, thr, abs_rot, known, abs_sig, cfg.init,
                              cfg.pairs.min_common_aps, ref_idx, keep_walk, cnt, trace=_TRACE, start=g)
         links = (lk, lq)
+    if cfg.init.merge_components:
+        # kNN links (when present) are within-component evidence; the candidate pairs carry the
+        # between-component evidence a merge is fitted on
+        g = merge_components(g, raw, path, walk_of, nk, nq, abs_rot, known, abs_sig, cfg.init, trace=_TRACE)
     res = InitResult(g.world_T_walk, g.component, g.component == 0, g.reference, [], g.heading_used & known,
                      abs_rot)
     res.grow = g
