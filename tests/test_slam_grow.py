@@ -155,3 +155,24 @@ def test_merge_components_pools_a_groups_pairs(consistent):
         assert np.abs(out.world_T_walk[:, 2] - true_T[:, 2]).max() < 0.01
     else:  # pairs that disagree with any rigid placement: the group stays apart
         assert (out.component == np.array([0, 1, 1])).all()
+
+
+def test_orient_components_turns_a_component_to_its_compass():
+    """A further component seeded in its own PDR frame is rotated so its walks' magnetometer rotations
+    agree with the reference's; the reference's component and heading-less components stay."""
+    from rmbuild.slam.grow import GrowResult, orient_components
+
+    rot_abs = np.array([0.3, 1.2, 1.25, -0.4])  # each walk frame's compass rotation
+    known = np.array([True, True, True, False])
+    # comp 1 = walks 1, 2 placed in walk 1's own frame (walk 2 truly 0.05 rad from walk 1); comp 2 = walk 3
+    T = np.array([[0, 0, 0], [0, 0, 0], [4.0, 1.0, 0.05], [0, 0, 0]])
+    g = GrowResult(T, np.array([0, 1, 1, 2]), 0, np.zeros(4, int), np.zeros(4, np.int64), np.zeros(4),
+                   np.array(["seed"] * 4, dtype=object), known.copy())
+    out = orient_components(g, rot_abs, known)
+    assert np.allclose(out.world_T_walk[0], 0)
+    assert np.allclose(out.world_T_walk[3], 0)  # no compass: left alone
+    # walks 1 and 2 now sit at their compass rotation relative to the reference, within the 0.05 rad they
+    # disagree by, and keep their relative placement
+    assert abs(out.world_T_walk[1, 2] - 0.9) < 0.03 and abs(out.world_T_walk[2, 2] - 0.95) < 0.03
+    assert np.isclose(np.linalg.norm(out.world_T_walk[2, :2] - out.world_T_walk[1, :2]), np.hypot(4, 1))
+    assert np.isclose(out.world_T_walk[2, 2] - out.world_T_walk[1, 2], 0.05)

@@ -691,3 +691,25 @@ def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: 
     # renumber the remaining components 1, 2, ... in their old order
     _, comp = np.unique(comp, return_inverse=True)
     return GrowResult(T, comp, ref, g.round_placed, g.n_inliers, g.shared_m, method, heading_used)
+
+
+def orient_components(g: GrowResult, rot_abs: np.ndarray, rot_known: np.ndarray) -> GrowResult:
+    """Rotate each component other than the reference's (about the origin, rigidly) so that its walks'
+    magnetometer rotations agree with the reference's on average (circular mean over its walks whose
+    heading is trusted). A further component is seeded in its seed walk's own PDR frame, whose start
+    heading is arbitrary; without this, its walks would start the joint solve up to 180 deg from their
+    heading priors. Components without a trusted heading, or a reference without one, are left as they are.
+    """
+    ref = g.reference
+    if not rot_known[ref]:
+        return g
+    T = g.world_T_walk.copy()
+    for c in np.unique(g.component):
+        members = g.component == c
+        hm = members & g.heading_used & rot_known
+        if c == g.component[ref] or not hm.any():
+            continue
+        off = float(np.angle(np.mean(np.exp(1j * (rot_abs[hm] - rot_abs[ref] - T[hm, 2])))))
+        for w in np.flatnonzero(members):
+            T[w] = _compose(np.array([0.0, 0.0, off]), T[w])
+    return GrowResult(T, g.component, ref, g.round_placed, g.n_inliers, g.shared_m, g.method, g.heading_used)

@@ -36,7 +36,7 @@ from rmbuild.slam.factors import (
     vicinity_factor,
     vicinity_noise,
 )
-from rmbuild.slam.grow import grow, grow_knn, merge_components
+from rmbuild.slam.grow import grow, grow_knn, merge_components, orient_components
 from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
 from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix
@@ -372,6 +372,9 @@ def optimize(
             # prior heading of pose i in the common frame: its yaw_abs minus the reference frame's rotation
             for i in idx:
                 noise = gtsam.noiseModel.Isotropic.Sigma(1, float(ysig[i]))
+                if cfg.solve.heading_prior_cauchy_k > 0:
+                    noise = gtsam.noiseModel.Robust.Create(
+                        gtsam.noiseModel.mEstimator.Cauchy.Create(cfg.solve.heading_prior_cauchy_k), noise)
                 static.add(gtsam.PoseRotationPrior2D(X(int(i)), gtsam.Pose2(0, 0, yaw[i] - world_rot), noise))
                 n_heading += 1
     timing["build"] = time.perf_counter() - t0
@@ -575,6 +578,7 @@ def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, a
         # kNN links (when present) are within-component evidence; the candidate pairs carry the
         # between-component evidence a merge is fitted on
         g = merge_components(g, raw, path, walk_of, nk, nq, abs_rot, known, abs_sig, cfg.init, trace=_TRACE)
+    g = orient_components(g, abs_rot, known)
     res = InitResult(g.world_T_walk, g.component, g.component == 0, g.reference, [], g.heading_used & known,
                      abs_rot)
     res.grow = g
