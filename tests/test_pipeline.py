@@ -68,8 +68,9 @@ def test_evaluate_report_shape(tiny_ws: Path) -> None:
     for m in rep["maps"].values():
         for s in m.values():
             assert set(s) >= keys
-    # on the tiny venue the built map localizes better than raw walks and near the surveyed map
-    built, raw, surveyed = (rep["maps"][m]["knn"]["median"] for m in ("built", "raw", "surveyed"))
+    # on the tiny venue the built map localizes better than raw walks and near the surveyed map (means:
+    # the tiny venue has ~13 test scans, too few for a stable median)
+    built, raw, surveyed = (rep["maps"][m]["knn"]["mean"] for m in ("built", "raw", "surveyed"))
     assert built < 0.8 * raw and built < 1.5 * surveyed, (built, raw, surveyed)
     assert ws.path("evaluate.cdf_png").exists()
 
