@@ -220,8 +220,9 @@ CASES = [("default", "robust"), ("default", "paper"), ("default", "ransac"), ("d
          ("corridor12", "robust"), ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust")]
 SCALING = [("large@2000", "robust"), ("large@10000", "robust")]  # + the full large case above
 # seed spread: `default` is one random venue per seed; a figure from one seed says little (measured: seed 7
-# is among the easiest). Each seed runs robust, paper and 30 % false pairs.
-SEEDS = (1, 2, 3, 7, 11, 13)
+# is among the easiest; six seeds still moved with every knob). Each seed runs robust, paper and 30 % false
+# pairs.
+SEEDS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 13)
 SEED_MODES = ("robust", "paper", "false30")
 
 
@@ -369,6 +370,13 @@ def main() -> None:
             lmx = np.median([c["landmark_error_m"]["max"] for c in ok])
             hdm = np.mean([c["heading_alignment_error_deg"]["mean"] for c in ok])
             print(f"| all {len(ok)} | {mode} | | {lmm:.2f} / median max {lmx:.2f} | {hdm:.2f} |")
+    clean = {c["seed"]: c["landmark_error_m"]["mean"] for c in results["seeds"]
+             if c["mode"] == "robust" and "error" not in c}
+    ratio = {c["seed"]: c["landmark_error_m"]["mean"] / clean[c["seed"]] for c in results["seeds"]
+             if c["mode"] == "false30" and "error" not in c and clean.get(c["seed"])}
+    if ratio:
+        print("30 % false pairs / clean landmark mean per seed: "
+              + ", ".join(f"{s}: {r:.2f}x" for s, r in ratio.items()) + f"; worst {max(ratio.values()):.2f}x")
     print("\n| floor | mode | linked | landmark raw / opt / linked-only mean m | built / surveyed kNN median m |\n"
           "|---|---|---|---|---|")
     for c in results["real"]:
