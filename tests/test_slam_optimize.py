@@ -39,6 +39,10 @@ def test_end_to_end_recovers_alignment(venue, result):
     assert opt["landmark_error_m"]["mean"] < 2.0
     assert opt["heading_alignment_error_deg"]["mean"] < 2.0
     assert r.walks["linked"].all() and not r.stats["rejected"]
+    # how each walk was placed: the reference, the rest by a walk-to-map (or walk-pair / merge) fit
+    placement = r.walks.set_index("walk_id")["placement"]
+    assert (placement == "reference").sum() == 1
+    assert set(placement) <= {"reference", "translation", "se2", "pair", "merge"}
     assert {"pair_search", "solve"} <= set(calls)
     assert list(r.poses.columns) == ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
     assert len(r.poses) == len(ds.poses) == len(r.initial_poses)

@@ -675,7 +675,7 @@ def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: 
             for w in np.flatnonzero(members):
                 T[w] = _compose(f.t, T[w])
             comp[members] = 0
-            method[members] = np.where(method[members] == "seed", "merge", method[members])
+            method[members] = "merge"
             if f.method == "se2":
                 heading_used[members] = False
             done = merged_any = True

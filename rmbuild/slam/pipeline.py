@@ -663,4 +663,18 @@ def _walk_table(walk_ids, starts, ends, keep, init: InitResult, T, pairs, walk_o
         "n_cross_pairs": n_cross, "n_partner_walks": [len(p) for p in partners], "shared_path_m": shared,
         "world_T_walk_x_m": T[:, 0], "world_T_walk_y_m": T[:, 1], "world_T_walk_theta_rad": T[:, 2],
         "heading_known": init.heading_known, "extent_ratio": extent_ratio, "confidence": conf,
+        "placement": _placement(init, linked, n_walks),
     })
+
+
+def _placement(init: InitResult, linked: np.ndarray, n_walks: int) -> np.ndarray:
+    """How each walk got its initial frame: "reference", "translation" / "se2" (walk-to-map fit with the
+    compass rotation / without), "pair" (a walk-pair RANSAC edge), "merge" (its component was fitted to the
+    map as one body), "" (not linked, or an initialisation other than "grow")."""
+    g = getattr(init, "grow", None)
+    out = np.full(n_walks, "", dtype=object)
+    if g is not None:
+        out[:] = g.method
+    out[init.reference] = "reference"
+    out[~linked] = ""
+    return out
