@@ -176,6 +176,9 @@ class InitConfig:
     # after growth, fit each component of >= 2 walks that is not linked to the reference's map rigidly to
     # that map from the pooled candidate pairs of its walks (same acceptance rules as a single walk's fit).
     merge_components: bool = True
+    # merge / kNN-growth alternations after the first growth (each merge grows the map the kNN rounds
+    # place the remaining walks on); 1 = merge once.
+    merge_rounds: int = 3
     # walk-level refinement: m, 1-sigma of a pair's position difference; Cauchy scale in sigmas; Gauss-
     # Newton iterations; pairs within refine_gate_factor * grow_gate_m of each other are used.
     pair_sigma_m: float = 3.0

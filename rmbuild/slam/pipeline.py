@@ -576,8 +576,18 @@ def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, a
         links = (lk, lq)
     if cfg.init.merge_components:
         # kNN links (when present) are within-component evidence; the candidate pairs carry the
-        # between-component evidence a merge is fitted on
-        g = merge_components(g, raw, path, walk_of, nk, nq, abs_rot, known, abs_sig, cfg.init, trace=_TRACE)
+        # between-component evidence a merge is fitted on. A merge grows the map, so the kNN rounds get
+        # another go at the walks still left over, then merging again, until the map stops growing.
+        for _ in range(cfg.init.merge_rounds):
+            n_placed = int((g.component == 0).sum())
+            g = merge_components(g, raw, path, walk_of, nk, nq, abs_rot, known, abs_sig, cfg.init, trace=_TRACE)
+            if int((g.component == 0).sum()) == n_placed:
+                break
+            if links is not None:
+                g, lk, lq = grow_knn(raw, path, walk_of, n_walks, rm, row_node, thr, abs_rot, known, abs_sig,
+                                     cfg.init, cfg.pairs.min_common_aps, ref_idx, keep_walk, cnt, trace=_TRACE,
+                                     start=g)
+                links = (np.r_[links[0], lk], np.r_[links[1], lq])
     g = orient_components(g, abs_rot, known)
     res = InitResult(g.world_T_walk, g.component, g.component == 0, g.reference, [], g.heading_used & known,
                      abs_rot)
