@@ -155,6 +155,23 @@ def _se2_two_point_hypotheses(p_map: np.ndarray, p_walk: np.ndarray, gate: float
     return ths, ts, px, py
 
 
+def _refine_on_inliers(p_src: np.ndarray, p_dst: np.ndarray, th: float, t: np.ndarray, se2: bool, gate: float):
+    """Refine a rigid fit p_dst ~ R(th) p_src + t on its inliers (< gate), three times: SE(2) (with >= 3
+    inliers, when ``se2``) or translation only. Returns (th, t, final inlier mask)."""
+    for _ in range(3):
+        cur = np.linalg.norm(p_dst - (p_src @ _rot(th).T + t), axis=1) < gate
+        if cur.sum() < 1:
+            break
+        if se2 and cur.sum() >= 3:
+            from rmbuild.evaluate.trajectory import align_se2, rotation_angle_rad
+
+            R, t = align_se2(p_src[cur], p_dst[cur])
+            th = rotation_angle_rad(R)
+        else:
+            t = np.mean(p_dst[cur] - p_src[cur] @ _rot(th).T, axis=0)
+    return th, t, np.linalg.norm(p_dst - (p_src @ _rot(th).T + t), axis=1) < gate
+
+
 def _score(inl: np.ndarray, wnode_idx: np.ndarray, n_u: int) -> np.ndarray:
     """Distinct walk nodes among each row's inliers: inl (h, m) bool -> (h,) counts."""
     onehot = np.zeros((inl.shape[1], n_u), np.float32)
@@ -197,19 +214,7 @@ def fit_walk_to_map(pm: np.ndarray, pw: np.ndarray, wnode: np.ndarray, wpath: np
         score = _score(inl, widx, n_u)
         h = int(np.argmax(score))
         t, th = ts[h], float(ths[h])
-    for _ in range(3):  # refine on the inliers
-        res = np.linalg.norm(pm - (pw @ _rot(th).T + t), axis=1)
-        cur = res < gate
-        if cur.sum() < 1:
-            break
-        if rot is None and cur.sum() >= 3:
-            from rmbuild.evaluate.trajectory import align_se2, rotation_angle_rad
-
-            R, t = align_se2(pw[cur], pm[cur])
-            th = rotation_angle_rad(R)
-        else:
-            t = np.mean(pm[cur] - pw[cur] @ _rot(th).T, axis=0)
-    inl_final = np.linalg.norm(pm - (pw @ _rot(th).T + t), axis=1) < gate
+    th, t, inl_final = _refine_on_inliers(pw, pm, th, t, rot is None, gate)
     best = int(len(np.unique(widx[inl_final])))
     # the best hypothesis that places the walk elsewhere (its centroid > 2 gates away)
     cen = pw.mean(axis=0)
@@ -427,18 +432,7 @@ def _fit_offsets(p_own: np.ndarray, x_hat: np.ndarray, path: np.ndarray, rot: fl
         cnt = (np.hypot(px - x_hat[None, :, 0], py - x_hat[None, :, 1]) < gate).sum(axis=1)
         h = int(np.argmax(cnt))
         th, t = float(ths[h]), ts[h]
-    for _ in range(3):
-        cur = np.linalg.norm(x_hat - (p_own @ _rot(th).T + t), axis=1) < gate
-        if cur.sum() < 1:
-            break
-        if rot is None and cur.sum() >= 3:
-            from rmbuild.evaluate.trajectory import align_se2, rotation_angle_rad
-
-            R, t = align_se2(p_own[cur], x_hat[cur])
-            th = rotation_angle_rad(R)
-        else:
-            t = np.mean(x_hat[cur] - p_own[cur] @ _rot(th).T, axis=0)
-    inl = np.linalg.norm(x_hat - (p_own @ _rot(th).T + t), axis=1) < gate
+    th, t, inl = _refine_on_inliers(p_own, x_hat, th, t, rot is None, gate)
     return WalkFit(np.array([t[0], t[1], float(_wrap(th))]), int(inl.sum()), m - int(inl.sum()),
                    covered_m(path[inl]) if inl.any() else 0.0, 0, "translation" if rot is not None else "se2", inl,
                    float(np.ptp(path[inl])) if inl.any() else 0.0)
@@ -614,6 +608,12 @@ def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: in
 
 
 # ------------------------------------------------------------------------------------- component merging
+def _component_compass_offset(T: np.ndarray, walks: np.ndarray, rot_abs: np.ndarray, ref: int) -> float:
+    """Rotation (rad) that takes a component's frame to the reference's by the compass: the circular mean
+    over ``walks`` (bool, trusted heading) of rot_abs[w] - rot_abs[ref] - T[w, 2]."""
+    return float(np.angle(np.mean(np.exp(1j * (rot_abs[walks] - rot_abs[ref] - T[walks, 2])))))
+
+
 def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, nk: np.ndarray,
                      nq: np.ndarray, rot_abs: np.ndarray, rot_known: np.ndarray, rot_sig: np.ndarray,
                      icfg: InitConfig, trace: list | None = None) -> GrowResult:
@@ -656,7 +656,7 @@ def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: 
             prior = np.nan
             hm = members & heading_used & rot_known
             if rot_known[ref] and hm.any():
-                prior = float(np.angle(np.mean(np.exp(1j * (rot_abs[hm] - rot_abs[ref] - T[hm, 2])))))
+                prior = _component_compass_offset(T, hm, rot_abs, ref)
             f, ok = None, False
             if np.isfinite(prior):
                 f = fit_walk_to_map(pm, pc, cnode, cpath, walk_of[mnode], prior, icfg, rng)
@@ -709,7 +709,7 @@ def orient_components(g: GrowResult, rot_abs: np.ndarray, rot_known: np.ndarray)
         hm = members & g.heading_used & rot_known
         if c == g.component[ref] or not hm.any():
             continue
-        off = float(np.angle(np.mean(np.exp(1j * (rot_abs[hm] - rot_abs[ref] - T[hm, 2])))))
+        off = _component_compass_offset(T, hm, rot_abs, ref)
         for w in np.flatnonzero(members):
             T[w] = _compose(np.array([0.0, 0.0, off]), T[w])
     return GrowResult(T, g.component, ref, g.round_placed, g.n_inliers, g.shared_m, g.method, g.heading_used)
