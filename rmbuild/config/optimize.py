@@ -212,6 +212,14 @@ class SolveConfig:
     max_iterations: int = 15
     relative_error_tol: float = 1e-3
     absolute_error_tol: float = 1e-6
+    # Levenberg-Marquardt damping schedule (gtsam's LevenbergMarquardtParams): the first lambda, the factor
+    # it is multiplied by after a rejected step, whether that factor stays fixed (else Nielsen's update:
+    # lambda shrinks by how well the linear model predicted the decrease, the factor doubles on each
+    # rejection) and whether the damping is scaled by the Hessian's diagonal.
+    lm_lambda_initial: float = 1e-5
+    lm_lambda_factor: float = 10.0
+    lm_fixed_lambda_factor: bool = False
+    lm_diagonal_damping: bool = False
     # "METIS" or "COLAMD" elimination ordering (FINDINGS: METIS ~3x faster at 50k poses).
     ordering: Literal["METIS", "COLAMD"] = "METIS"
     # poses; below this COLAMD is used whatever ``ordering`` says (METIS only pays off on big graphs).
@@ -286,6 +294,8 @@ class SolveConfig:
     def validate(self) -> None:
         if self.max_iterations < 1 or self.outer_iterations < 1 or self.heading_prior_every_n < 0:
             raise ValueError("max_iterations >= 1, outer_iterations >= 1, heading_prior_every_n >= 0")
+        if not (self.lm_lambda_initial > 0 and self.lm_lambda_factor > 1):
+            raise ValueError("lm_lambda_initial > 0 and lm_lambda_factor > 1")
         if self.heading_prior_sigma_scale <= 0 or self.heading_prior_cauchy_k < 0:
             raise ValueError("heading_prior_sigma_scale must be > 0 and heading_prior_cauchy_k >= 0")
         if any(not 1.0 <= f <= 20.0 for f in self.gnc_factors):

@@ -175,6 +175,10 @@ def _levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, prog
     params.setRelativeErrorTol(cfg.solve.relative_error_tol)
     params.setAbsoluteErrorTol(cfg.solve.absolute_error_tol)
     params.setOrderingType(ordering)
+    params.setlambdaInitial(cfg.solve.lm_lambda_initial)
+    params.setlambdaFactor(cfg.solve.lm_lambda_factor)
+    params.setUseFixedLambdaFactor(cfg.solve.lm_fixed_lambda_factor)
+    params.setDiagonalDamping(cfg.solve.lm_diagonal_damping)
 
     def hook(it, before, after):
         history.append(float(after))
