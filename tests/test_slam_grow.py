@@ -176,3 +176,45 @@ def test_orient_components_turns_a_component_to_its_compass():
     assert abs(out.world_T_walk[1, 2] - 0.9) < 0.03 and abs(out.world_T_walk[2, 2] - 0.95) < 0.03
     assert np.isclose(np.linalg.norm(out.world_T_walk[2, :2] - out.world_T_walk[1, :2]), np.hypot(4, 1))
     assert np.isclose(out.world_T_walk[2, 2] - out.world_T_walk[1, 2], 0.05)
+
+
+@pytest.mark.parametrize("reselect", [True, False])
+def test_reference_reselected_when_its_component_is_small(monkeypatch, reselect):
+    """The walk with the most candidates seeds a 1-walk component while 4 walks form another: with
+    ``init.reselect_reference`` growth restarts from the best-connected walk of the large component."""
+    import pandas as pd
+
+    import rmbuild.slam.pipeline as P
+    from rmbuild.slam.init import InitResult
+
+    n_walks, per = 5, 10
+    walk_of = np.repeat(np.arange(n_walks), per)
+    path = np.tile(np.arange(per) * 0.7, n_walks)
+    # walk 4 has the most cross candidates (look-alikes), then walk 2
+    k = np.r_[np.full(32, 40), np.full(12, 20), np.full(5, 21)]
+    q = np.r_[np.tile([5, 15, 25, 35], 8), np.full(12, 15), np.full(5, 31)]
+    cand = pd.DataFrame({"node_k": k, "node_q": q})
+    calls = []
+
+    def fake_grow_from(ref, *args):
+        calls.append(ref)
+        comp = np.array([1, 1, 1, 1, 0]) if ref == 4 else np.array([0, 0, 0, 0, 1])
+        return InitResult(np.zeros((n_walks, 3)), comp, comp == 0, ref, [], np.zeros(n_walks, bool),
+                          np.zeros(n_walks))
+
+    monkeypatch.setattr(P, "_grow_from", fake_grow_from)
+    cfg = OptimizeConfig()
+    cfg = dataclasses.replace(cfg, init=dataclasses.replace(cfg.init, reselect_reference=reselect))
+    args = (np.zeros((len(walk_of), 3)), path, walk_of, n_walks, cand, np.zeros(n_walks), np.zeros(n_walks, bool),
+            np.zeros(n_walks), cfg)
+    rest = (np.ones(n_walks, bool), None, None, None)
+    res = P._grow_init(*args, None, *rest)
+    if reselect:
+        assert calls == [4, 2]
+        assert res.reference == 2 and res.linked[:4].all() and not res.linked[4]
+    else:
+        assert calls == [4]
+        assert res.reference == 4
+    calls.clear()
+    res = P._grow_init(*args, 1, *rest)  # a configured reference is kept as given
+    assert calls == [1] and res.reference == 1

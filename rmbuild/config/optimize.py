@@ -179,6 +179,11 @@ class InitConfig:
     # merge / kNN-growth alternations after the first growth (each merge grows the map the kNN rounds
     # place the remaining walks on); 1 = merge once.
     merge_rounds: int = 3
+    # without a configured reference_walk the walk with the most cross-walk candidates seeds the map; when
+    # its component ends up smaller (walked path) than another, grow again from that other component's
+    # best-connected walk and keep the larger reference component. Measured on ILC F1: a look-alike corner
+    # walk seeded a 3-walk component (27 components) when the scan times were shifted by ~1.3 s.
+    reselect_reference: bool = True
     # walk-level refinement: m, 1-sigma of a pair's position difference; Cauchy scale in sigmas; Gauss-
     # Newton iterations; pairs within refine_gate_factor * grow_gate_m of each other are used.
     pair_sigma_m: float = 3.0

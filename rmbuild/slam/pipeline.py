@@ -557,12 +557,45 @@ def _frame_rotation_from(T: np.ndarray, init: InitResult, ref: int) -> float:
 def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, abs_known, abs_sig,
                cfg: OptimizeConfig, ref_idx: int | None, keep_walk: np.ndarray, rm: RssMatrix,
                row_node: np.ndarray, meta: RowMeta) -> InitResult:
-    """Walk frames by incremental walk-to-map placement (rmbuild/slam/grow.py)."""
+    """Walk frames by incremental walk-to-map placement (rmbuild/slam/grow.py).
+
+    Without a user-given reference the walk with the most cross-walk candidates seeds the map. When that
+    walk's component ends up smaller (in walked path) than another one — its candidates were look-alikes
+    of a small corner, say — growth is run again from the best-connected walk of the largest component
+    and the larger of the two reference components is kept (``init.reselect_reference``).
+    """
+    nk, nq = cand_cross["node_k"].to_numpy(), cand_cross["node_q"].to_numpy()
+    cnt = np.bincount(np.r_[walk_of[nk], walk_of[nq]], minlength=n_walks).astype(float)
+    args = (raw, path, walk_of, n_walks, cand_cross, abs_rot, abs_known, abs_sig, cfg, keep_walk, rm, row_node,
+            meta, cnt)
+    if ref_idx is not None:
+        return _grow_from(ref_idx, *args)
+    res = _grow_from(int(np.argmax(np.where(keep_walk, cnt, -1))), *args)
+    if not cfg.init.reselect_reference:
+        return res
+    wlen = np.zeros(n_walks)
+    np.maximum.at(wlen, walk_of, path)
+    lo = np.full(n_walks, np.inf)
+    np.minimum.at(lo, walk_of, path)
+    wlen = np.where(np.isfinite(lo), wlen - lo, 0.0) * keep_walk
+    size = np.bincount(res.component, weights=wlen)
+    big = int(np.argmax(size))
+    if big == 0 or size[big] <= size[0]:
+        return res
+    in_big = res.component == big
+    alt = _grow_from(int(np.argmax(np.where(in_big & keep_walk, cnt, -1))), *args)
+    alt_size = float(wlen[alt.component == 0].sum())
+    log.info("reference walk reselected: its component had %.0f m of walks, another %.0f m; regrown: %.0f m",
+             size[0], size[big], alt_size)
+    return alt if alt_size > size[0] else res
+
+
+def _grow_from(ref_idx: int, raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, abs_known, abs_sig,
+               cfg: OptimizeConfig, keep_walk: np.ndarray, rm: RssMatrix, row_node: np.ndarray, meta: RowMeta,
+               cnt: np.ndarray) -> InitResult:
+    """One growth (pairs, kNN rounds, merges) from the reference walk ``ref_idx``."""
     nk, nq = cand_cross["node_k"].to_numpy(), cand_cross["node_q"].to_numpy()
     known = abs_known & cfg.init.use_abs_heading
-    cnt = np.bincount(np.r_[walk_of[nk], walk_of[nq]], minlength=n_walks).astype(float)
-    if ref_idx is None:
-        ref_idx = int(np.argmax(np.where(keep_walk, cnt, -1)))
     links = None
     g = None
     edges = None
