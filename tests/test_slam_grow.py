@@ -218,3 +218,32 @@ def test_reference_reselected_when_its_component_is_small(monkeypatch, reselect)
     calls.clear()
     res = P._grow_init(*args, 1, *rest)  # a configured reference is kept as given
     assert calls == [1] and res.reference == 1
+
+
+@pytest.mark.parametrize("short_walk_m", [0.0, 60.0])
+def test_short_walk_keeps_magnetometer_rotation_in_refinement(short_walk_m):
+    """A 39 m walk whose pairs say it is turned 10 deg from its magnetometer rotation: the refinement
+    follows the pairs (mostly) unless the walk counts as short, when it keeps the magnetometer's."""
+    from rmbuild.slam.grow import _refine_placed
+
+    n = 40
+    own = np.c_[np.arange(n, dtype=float), np.zeros(n), np.zeros(n)]  # walk 1 in its own frame
+    th = np.deg2rad(10.0)
+    true_xy = own[:, :2] @ np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]]).T + (5.0, 5.0)
+    raw = np.vstack([np.c_[true_xy, np.zeros(n)], own])  # walk 0 (reference, identity frame) lies on walk 1
+    walk_of = np.repeat([0, 1], n)
+    nk, nq = np.arange(n), np.arange(n) + n
+    T = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 0.0]])  # walk 1 placed at its magnetometer rotation (0)
+    icfg = dataclasses.replace(InitConfig(), short_walk_m=short_walk_m)
+    path = np.r_[np.arange(n), np.arange(n)].astype(float)
+    from rmbuild.slam.grow import _walk_lengths
+
+    wl = _walk_lengths(path, walk_of, 2, icfg)
+    # the reference walk without a heading prior: its frame is held fixed, only walk 1 turns
+    T2 = _refine_placed(T, np.ones(2, bool), nk, nq, raw, walk_of, 0, np.zeros(2), np.array([False, True]),
+                        np.full(2, 0.1), icfg, wl)
+    got = np.rad2deg(T2[1, 2])
+    if short_walk_m > 0:
+        assert abs(got) < 1.0
+    else:
+        assert got > 5.0

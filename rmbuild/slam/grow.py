@@ -353,7 +353,7 @@ def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, n
                 method[w] = f.method
                 if f.method in ("se2", "pair") and np.isfinite(prior[w]):
                     heading_used[w] = abs(_wrap(f.t[2] - prior[w])) < icfg.heading_outlier_sigmas * rot_sig[w]
-            T = _refine_placed(T, placed, nk, nq, raw, walk_of, seed, prior, heading_used, rot_sig, icfg)
+            T = _refine_placed(T, placed, nk, nq, raw, walk_of, seed, prior, heading_used, rot_sig, icfg, wlen)
             off = np.abs(_wrap(T[:, 2] - prior)) > icfg.heading_outlier_sigmas * rot_sig
             heading_used &= ~(placed & np.isfinite(prior) & off)
         c_id += 1
@@ -394,11 +394,20 @@ def _inv(a: np.ndarray) -> np.ndarray:
     return np.array([t[0], t[1], -a[2]])
 
 
-def _refine_placed(T, placed, nk, nq, raw, walk_of, ref, prior, heading_used, rot_sig, icfg: InitConfig):
-    """Refine the placed walks on the candidate pairs currently within the gate (twice, re-gating)."""
+def _refine_placed(T, placed, nk, nq, raw, walk_of, ref, prior, heading_used, rot_sig, icfg: InitConfig,
+                   walk_len: np.ndarray):
+    """Refine the placed walks on the candidate pairs currently within the gate (twice, re-gating).
+
+    Walks shorter than ``icfg.short_walk_m`` (walked length) keep their magnetometer rotation: their prior
+    sigma is scaled by ``icfg.short_walk_rot_sigma_scale``. Over a short walk's few metres of lever arm
+    Wi-Fi pairs, metres apart and correlated along the walk, turn it further from the truth than the
+    magnetometer is (ILC F1: rotation error mean 11.2 deg when pairs may turn them, 7.2 deg for the
+    magnetometer alone).
+    """
     wk, wq = walk_of[nk], walk_of[nq]
     both = placed[wk] & placed[wq]
     pr = np.where(heading_used, prior, np.nan)
+    rot_sig = np.where(walk_len < icfg.short_walk_m, rot_sig * icfg.short_walk_rot_sigma_scale, rot_sig)
     for _ in range(2):
         d = np.linalg.norm(world_xy(raw, T, walk_of, nk[both]) - world_xy(raw, T, walk_of, nq[both]), axis=1)
         sel = np.flatnonzero(both)[d < icfg.grow_gate_m * icfg.refine_gate_factor]
@@ -588,7 +597,7 @@ def grow_knn(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: in
                 link_k.append(a)
                 link_q.append(b)
             lk, lq = np.concatenate(link_k), np.concatenate(link_q)
-            T = _refine_placed(T, placed, lk, lq, raw, walk_of, seed, prior, heading_used, rot_sig, icfg)
+            T = _refine_placed(T, placed, lk, lq, raw, walk_of, seed, prior, heading_used, rot_sig, icfg, wlen)
             off = np.abs(_wrap(T[:, 2] - prior)) > icfg.heading_outlier_sigmas * rot_sig
             heading_used &= ~(placed & np.isfinite(prior) & off)
         c_id += 1
@@ -687,7 +696,8 @@ def merge_components(g: GrowResult, raw: np.ndarray, path: np.ndarray, walk_of: 
     placed = comp == 0
     prior_all = np.where(rot_known, _wrap(rot_abs - rot_abs[ref]), np.nan) if rot_known[ref] else np.full(n_walks,
                                                                                                         np.nan)
-    T = _refine_placed(T, placed, nk, nq, raw, walk_of, ref, prior_all, heading_used, rot_sig, icfg)
+    T = _refine_placed(T, placed, nk, nq, raw, walk_of, ref, prior_all, heading_used, rot_sig, icfg,
+                       _walk_lengths(path, walk_of, n_walks, icfg))
     # renumber the remaining components 1, 2, ... in their old order
     _, comp = np.unique(comp, return_inverse=True)
     return GrowResult(T, comp, ref, g.round_placed, g.n_inliers, g.shared_m, method, heading_used)
