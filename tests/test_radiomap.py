@@ -164,3 +164,28 @@ def test_figures():
     assert isinstance(fig, Figure)
     assert sum(ax.has_data() for ax in fig.axes) >= 4
     assert rm.strongest_aps(2) == rm.strongest_aps(5)[:2]
+
+
+def test_built_positions_leave_out_walks_neither_linked_nor_anchored():
+    """export-map / evaluate keep walks placed by Wi-Fi links or by anchors; the rest only on request."""
+    from types import SimpleNamespace
+
+    from rmbuild.stages.mapping import built_positions
+
+    poses = pd.DataFrame({"walk_id": ["a", "a", "b", "b", "c", "c"], "step": [0, 1] * 3,
+                          "x_m": np.arange(6.0), "y_m": np.zeros(6)})
+    walks = pd.DataFrame({"walk_id": ["a", "b", "c"], "linked": [True, False, False],
+                          "anchored": [False, True, False]})
+    tables = {"optimize.poses": poses, "optimize.walks": walks}
+    ws = SimpleNamespace(require=lambda stage: None, read_table=tables.__getitem__,
+                         read_report=lambda stage: {"gauge": "anchors", "reference_walk": "a"}, path=str)
+    ds = SimpleNamespace(n_nodes=6, poses=poses)
+    xy, info = built_positions(ws, ds, MapConfig())
+    assert info["left_out_walks"] == ["c"] and info["frame"] == "building"
+    assert np.isfinite(xy[:4]).all() and np.isnan(xy[4:]).all()
+    xy, info = built_positions(ws, ds, dataclasses.replace(MapConfig(), include_unlinked_walks=True))
+    assert info["left_out_walks"] == [] and np.isfinite(xy).all()
+    # a workspace from before the anchored column: linked alone decides
+    tables["optimize.walks"] = walks.drop(columns="anchored")
+    xy, info = built_positions(ws, ds, MapConfig())
+    assert info["left_out_walks"] == ["b", "c"]

@@ -162,3 +162,26 @@ def test_anchor_just_before_the_first_step_fixes_the_first_pose():
     assert list(_anchor_nodes(anchors, poses, slices, max_gap_s=1.0)) == [3, 2]
     with pytest.raises(InputError, match="anchor_max_gap_s = 0.5"):
         _anchor_nodes(anchors, poses, slices, max_gap_s=0.5)
+
+
+def test_anchor_places_a_walk_wifi_cannot_link(venue):
+    """A walk without any Wi-Fi is not linked; one anchor (and its magnetometer rotation) places it in the
+    building frame: reported as anchored / placement "anchor", and close to the truth."""
+    ds, fp = venue
+    lone = "w004"
+    nodes_lone = np.flatnonzero(ds.poses["walk_id"].astype(str).to_numpy() == lone)
+    fp2 = fp.subset(~np.isin(fp.node, nodes_lone))
+    fx = ds.fixes
+    anchors = pd.concat([fx[fx["walk_id"] == "w000"].head(2), fx[fx["walk_id"] == lone].head(1)])
+    anchors = anchors[["walk_id", "t_s", "x_m", "y_m"]].reset_index(drop=True)
+    r = optimize(ds, fp2, OptimizeConfig(), anchors=anchors)
+    w = r.walks.set_index("walk_id")
+    assert not w.loc[lone, "linked"] and w.loc[lone, "anchored"] and w.loc[lone, "placement"] == "anchor"
+    assert w.loc["w000", "linked"] and w.loc["w000", "anchored"] and w.loc["w000", "placement"] == "reference"
+    m = r.poses["walk_id"].astype(str).to_numpy() == lone
+    err = np.hypot(*(r.poses.loc[m, ["x_m", "y_m"]].to_numpy() - ds.truth_poses.loc[m, ["x_m", "y_m"]].to_numpy()).T)
+    assert np.median(err) < 6.0
+    # without its anchor the walk stays unplaced
+    r2 = optimize(ds, fp2, OptimizeConfig(), anchors=anchors.iloc[:2])
+    w2 = r2.walks.set_index("walk_id")
+    assert not w2.loc[lone, "linked"] and not w2.loc[lone, "anchored"] and w2.loc[lone, "placement"] == ""

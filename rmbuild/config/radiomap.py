@@ -58,8 +58,9 @@ class MapConfig:
     frame: str = ""
     # 1; number of strongest APs (by peak cell mean) that get a heat map.
     heatmap_top_n: int = 6
-    # Walks that optimize could not link to the reference walk by Wi-Fi have an unconstrained placement;
-    # false (default) leaves their nodes out of the built map, true keeps them where optimize put them.
+    # Walks that optimize could not link to the reference walk by Wi-Fi (and that no anchors placed) have an
+    # unconstrained placement; false (default) leaves their nodes out of the built map, true keeps them
+    # where optimize put them.
     include_unlinked_walks: bool = False
     fill: FillConfig = field(default_factory=FillConfig)
 

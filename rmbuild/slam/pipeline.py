@@ -280,6 +280,7 @@ def optimize(
     init_xyt = _apply_frames(raw, starts, ends, T)
     gauge_full, gauge_rot_only = _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init, T,
                                                      raw, starts, ends)
+    anchored = _anchored_walks(anchors, anchor_nodes, walk_of, init) & keep_walk
     init_xyt = _apply_frames(raw, starts, ends, T)
     timing["init"] = time.perf_counter() - t0
 
@@ -513,13 +514,17 @@ def optimize(
     walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio, cfg)
     walks_df["scale"] = scale
     walks_df["scale_fitted"] = scale_fitted
-    unlinked = np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy())
+    walks_df["anchored"] = anchored
+    walks_df.loc[anchored & ~walks_df["linked"].to_numpy(), "placement"] = "anchor"
+    unlinked = np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy() & ~anchored)
+    by_anchor = int((anchored & ~walks_df["linked"].to_numpy()).sum())
     if len(unlinked):
         # one line however many walks (a 100-walk floor can leave dozens): the full list is optimize/walks
         names = ", ".join(walk_ids[w] for w in unlinked[:5]) + (", ..." if len(unlinked) > 5 else "")
+        also = f"; {by_anchor} more placed by anchors alone" if by_anchor else ""
         warnings.append(f"{len(unlinked)} of {int(keep_walk.sum())} walk(s) not linked to the reference walk "
-                        f"{walk_ids[ref]} ({names}): their placement is not constrained by Wi-Fi "
-                        "(optimize/walks.parquet: linked, component)")
+                        f"{walk_ids[ref]} ({names}): their placement is not constrained by Wi-Fi{also} "
+                        "(optimize/walks.parquet: linked, anchored, component)")
     if n_walks > 1 and walks_df["linked"].sum() <= 1:
         warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
     for wmsg in warnings:
@@ -649,6 +654,22 @@ def _origin_init(cand_cross: pd.DataFrame, walk_of: np.ndarray, n_walks: int, re
                       np.zeros(n_walks))
 
 
+def _anchored_walks(anchors, anchor_nodes, walk_of, init: InitResult) -> np.ndarray:
+    """bool per walk: placed in the building frame by anchors — its component has >= 2 anchors more than
+    1 m apart (position and rotation), or one anchor and the walk's own magnetometer rotation."""
+    out = np.zeros(len(init.component), bool)
+    if not len(anchor_nodes):
+        return out
+    comp_a = init.component[walk_of[anchor_nodes]]
+    xy = anchors[["x_m", "y_m"]].to_numpy(float)
+    for c in np.unique(comp_a):
+        m = comp_a == c
+        spread = m.sum() >= 2 and np.ptp(xy[m], axis=0).max() > 1.0
+        walks_c = init.component == c
+        out[walks_c] = spread | np.asarray(init.heading_known, bool)[walks_c]
+    return out
+
+
 def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResult, T, raw, starts, ends):
     """Move each component onto its anchors (SE(2) with >= 2 distinct anchors, translation with 1) by
     updating T in place; returns (walks needing a full gauge prior, walks needing a rotation prior)."""
@@ -656,6 +677,7 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
 
     full, rot_only = [], []
     n_comp = int(init.component.max()) + 1 if len(init.component) else 0
+    th_ref = 0.0  # rotation the anchors gave the reference component (components are rotated in its frame)
     for c in range(n_comp):
         walks_c = np.flatnonzero(init.component == c)
         root = init.reference if c == 0 else int(walks_c[0])
@@ -669,8 +691,14 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
             R, t = align_se2(src, dst)
             th = rotation_angle_rad(R)
         else:
-            th, t = 0.0, (dst - src).mean(axis=0)
+            # one anchor: the position only; the rotation is the reference component's (a further
+            # component was turned to its magnetometer in the reference walk's frame)
+            th = th_ref
+            c_, s_ = np.cos(th), np.sin(th)
+            t = (dst - src @ np.array([[c_, -s_], [s_, c_]]).T).mean(axis=0)
             rot_only.append(root)
+        if c == 0:
+            th_ref = th
         G = np.array([t[0], t[1], th])
         for w in walks_c:
             c_, s_ = np.cos(G[2]), np.sin(G[2])

@@ -25,7 +25,11 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     walks = ws.read_table("optimize.walks")
     info: dict = {"gauge": report.get("gauge", "se2"), "left_out_walks": []}
     if "linked" in walks and not cfg.include_unlinked_walks:
-        unlinked = set(walks.loc[~walks["linked"].astype(bool), "walk_id"].astype(str))
+        # walks placed neither by Wi-Fi links nor by anchors are left out
+        placed = walks["linked"].astype(bool)
+        if "anchored" in walks:
+            placed |= walks["anchored"].astype(bool)
+        unlinked = set(walks.loc[~placed, "walk_id"].astype(str))
         info["left_out_walks"] = sorted(unlinked)
         xy[ds.poses["walk_id"].astype(str).isin(unlinked).to_numpy()] = np.nan
     ref = report.get("reference_walk")
