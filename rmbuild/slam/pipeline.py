@@ -61,7 +61,8 @@ class OptimizeResult:
     common, init_dist_m, final_dist_m, final_error (eq. 10 e), in_range (d < d_max at the end).
     ``candidates``: every pair the search produced (before verification), with ``used`` and ``injected``.
     ``walks``: per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, shared_path_m,
-    n_partner_walks, world_T_walk_x_m / _y_m / _theta_rad, extent_ratio, confidence (0-1), heading_known.
+    n_partner_walks, world_T_walk_x_m / _y_m / _theta_rad, extent_ratio, confidence (0-1), heading_known,
+    placement (how the walk got its initial frame), scale, scale_fitted, anchored (placed by anchors).
     ``stats``: factor counts, costs, iterations, time_s per phase, cost_history, warnings, ... (JSON-able).
     """
 
