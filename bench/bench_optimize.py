@@ -30,6 +30,7 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results" / "optimize.json"
 DATASETS = Path(os.environ.get("RMBUILD_DATASETS", "/work/shared/datasets"))
 ILC_FLOORS = {"F1": "msft-ilc20/data/site1/F1", "F4": "msft-ilc20/data/site2/F4"}
+ANCHOR_EVERY = 5  # real "anchors" mode: one anchor (a first waypoint) on every 5th walk
 SCRATCH = Path(os.environ.get("RMBUILD_BENCH_SCRATCH", "/tmp/rmbuild-bench-optimize"))
 
 
@@ -259,8 +260,16 @@ def real_case(floor: str, mode: str) -> dict:
         shutil.copy(src / "reports" / "ingest.json", ws / "reports" / "ingest.json")
     cli = str(Path(sys.executable).with_name("rmbuild"))
     preset = "paper" if mode == "paper" else "rmbuild"
+    extra, n_anchors = [], 0
+    if mode == "anchors":
+        # a known position for one moment of every ANCHOR_EVERY-th walk (walk ids sorted): its first waypoint
+        fx = Workspace.open(ws).read_dataset().fixes
+        wids = sorted(fx["walk_id"].astype(str).unique())[::ANCHOR_EVERY]
+        an = fx[fx["walk_id"].astype(str).isin(wids)].groupby("walk_id").head(1)
+        an[["walk_id", "t_s", "x_m", "y_m"]].to_csv(ws / "anchors.csv", index=False)
+        extra, n_anchors = ["--anchors", str(ws / "anchors.csv")], len(an)
     t0 = time.perf_counter()
-    subprocess.run([cli, "optimize", "-w", str(ws), "--preset", preset, "--force", "-q"], check=True)
+    subprocess.run([cli, "optimize", "-w", str(ws), "--preset", preset, "--force", "-q"] + extra, check=True)
     t_opt = time.perf_counter() - t0
     subprocess.run([cli, "export-map", "-w", str(ws), "--force", "-q"], check=True)
     subprocess.run([cli, "evaluate", "-w", str(ws), "--force", "-q"], check=True)
@@ -280,8 +289,11 @@ def real_case(floor: str, mode: str) -> dict:
         e = np.linalg.norm(est[ok] @ R.T + t - tru[ok], axis=1)
         lm_linked = {"mean": float(e.mean()), "median": float(np.median(e)), "n": int(ok.sum())}
     knn = {m: {k: ev["maps"][m]["knn"][k] for k in ("mean", "median", "p90")} for m in ev["maps"]}
+    anchored = int((walks["anchored"].astype(bool) & ~walks["linked"].astype(bool)).sum()) if "anchored" in walks else 0
     return {"floor": floor, "mode": mode, "walks": rep["walks"], "poses": rep["poses"],
-            "linked_walks": rep.get("linked_walks"), "components": rep.get("components"),
+            "linked_walks": rep.get("linked_walks"), "anchored_only_walks": anchored,
+            "anchors": n_anchors,
+            "components": rep.get("components"),
             "landmark_raw_m": rep["raw"]["landmark_error_m"],
             "landmark_optimized_m": rep["optimized"]["landmark_error_m"],
             "landmark_linked_walks_m": lm_linked, "knn": knn, "optimize_s": round(t_opt, 2)}
@@ -328,7 +340,7 @@ def main() -> None:
         results["cases"].append(json.loads(p.stdout.strip().splitlines()[-1]))
     if not a.skip_real and DATASETS.exists():
         for floor in ILC_FLOORS:
-            for mode in ("robust", "paper"):
+            for mode in ("robust", "paper") + (("anchors",) if floor == "F1" else ()):
                 p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--real", floor, mode],
                                    capture_output=True, text=True)
                 if p.returncode != 0:
@@ -384,7 +396,8 @@ def main() -> None:
             print(f"| {c['floor']} | {c['mode']} | error: {c['error']} |")
             continue
         ll = c["landmark_linked_walks_m"]
-        print(f"| {c['floor']} | {c['mode']} | {c['linked_walks']}/{c['walks']} | "
+        plus = f" + {c['anchored_only_walks']} by anchors" if c.get("anchored_only_walks") else ""
+        print(f"| {c['floor']} | {c['mode']} | {c['linked_walks']}/{c['walks']}{plus} | "
               f"{c['landmark_raw_m']['mean']:.1f} / {c['landmark_optimized_m']['mean']:.1f} / "
               f"{ll['mean'] if ll else float('nan'):.1f} | "
               f"{c['knn']['built']['median']:.1f} / {c['knn']['surveyed']['median']:.1f} |")
