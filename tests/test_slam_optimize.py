@@ -177,6 +177,7 @@ def test_anchor_places_a_walk_wifi_cannot_link(venue):
     r = optimize(ds, fp2, OptimizeConfig(), anchors=anchors)
     w = r.walks.set_index("walk_id")
     assert not w.loc[lone, "linked"] and w.loc[lone, "anchored"] and w.loc[lone, "placement"] == "anchor"
+    assert r.stats["anchored_only_walks"] == 1
     assert w.loc["w000", "linked"] and w.loc["w000", "anchored"] and w.loc["w000", "placement"] == "reference"
     m = r.poses["walk_id"].astype(str).to_numpy() == lone
     err = np.hypot(*(r.poses.loc[m, ["x_m", "y_m"]].to_numpy() - ds.truth_poses.loc[m, ["x_m", "y_m"]].to_numpy()).T)

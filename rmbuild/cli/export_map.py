@@ -30,5 +30,5 @@ def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, 
                    f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {workspace}/map/")
         left = r["frame_info"].get("left_out_walks") or []
         if left:
-            click.echo(f"note: {len(left)} walk(s) not linked by Wi-Fi were left out: {', '.join(left[:8])}",
-                       err=True)
+            click.echo(f"note: {len(left)} walk(s) placed neither by Wi-Fi links nor by anchors were left out: "
+                       f"{', '.join(left[:8])}", err=True)

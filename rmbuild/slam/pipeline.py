@@ -541,6 +541,7 @@ def optimize(
         "candidates": int(len(cand)), "candidates_cross": int(cross.sum()),
         "walk_pairs_tested": len(init.fits), "walk_pairs_accepted": int(sum(f.accepted for f in init.fits)),
         "reference_walk": walk_ids[ref], "linked_walks": int(walks_df["linked"].sum()),
+        "anchored_only_walks": by_anchor,
         "components": int(init.component.max() + 1) if n_walks else 0,
         "initial_cost": init_cost_all, "final_cost": final_cost, "first_solve_initial_cost": initial_cost,
         "iterations": iterations, "outer_iterations": outer_done, "ordering": ordering, "cost_history": cost_history,
