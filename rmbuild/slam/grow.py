@@ -374,13 +374,18 @@ def grow(raw: np.ndarray, path: np.ndarray, walk_of: np.ndarray, n_walks: int, n
     return GrowResult(T, comp, reference, rnd, n_inl, shared, method, heading_used & (comp >= 0))
 
 
-def _walk_lengths(path: np.ndarray, walk_of: np.ndarray, n_walks: int, icfg: InitConfig) -> np.ndarray:
-    """Walked length (m) of each walk, capped at grow_window_m (the length a rigid fit covers) when set."""
+def walked_lengths(path: np.ndarray, walk_of: np.ndarray, n_walks: int) -> np.ndarray:
+    """Walked length (m) of each walk from the cumulative walked distance ``path`` of its nodes (0: none)."""
     hi = np.full(n_walks, -np.inf)
     lo = np.full(n_walks, np.inf)
     np.maximum.at(hi, walk_of, path)
     np.minimum.at(lo, walk_of, path)
-    wl = np.where(np.isfinite(hi), hi - lo, 0.0)
+    return np.where(np.isfinite(hi), hi - lo, 0.0)
+
+
+def _walk_lengths(path: np.ndarray, walk_of: np.ndarray, n_walks: int, icfg: InitConfig) -> np.ndarray:
+    """Walked length (m) of each walk, capped at grow_window_m (the length a rigid fit covers) when set."""
+    wl = walked_lengths(path, walk_of, n_walks)
     return np.minimum(wl, icfg.grow_window_m) if icfg.grow_window_m > 0 else wl
 
 

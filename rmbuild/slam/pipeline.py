@@ -36,7 +36,7 @@ from rmbuild.slam.factors import (
     vicinity_factor,
     vicinity_noise,
 )
-from rmbuild.slam.grow import grow, grow_knn, merge_components, orient_components
+from rmbuild.slam.grow import grow, grow_knn, merge_components, orient_components, walked_lengths
 from rmbuild.slam.init import InitResult, _covered_m, initialise, walk_abs_rotation, yaw_sigma
 from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix
@@ -580,11 +580,7 @@ def _grow_init(raw, path, walk_of, n_walks, cand_cross: pd.DataFrame, abs_rot, a
     res = _grow_from(int(np.argmax(np.where(keep_walk, cnt, -1))), *args)
     if not cfg.init.reselect_reference:
         return res
-    wlen = np.zeros(n_walks)
-    np.maximum.at(wlen, walk_of, path)
-    lo = np.full(n_walks, np.inf)
-    np.minimum.at(lo, walk_of, path)
-    wlen = np.where(np.isfinite(lo), wlen - lo, 0.0) * keep_walk
+    wlen = walked_lengths(path, walk_of, n_walks) * keep_walk
     size = np.bincount(res.component, weights=wlen)
     big = int(np.argmax(size))
     if big == 0 or size[big] <= size[0]:
