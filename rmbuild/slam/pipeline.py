@@ -279,9 +279,8 @@ def optimize(
     if anchors is not None and len(anchors):
         anchor_nodes = _anchor_nodes(anchors, poses, slices, cfg.solve.anchor_max_gap_s)
     init_xyt = _apply_frames(raw, starts, ends, T)
-    gauge_full, gauge_rot_only = _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init, T,
-                                                     raw, starts, ends)
-    anchored = _anchored_walks(anchors, anchor_nodes, walk_of, init) & keep_walk
+    gauge_full, gauge_rot_only, anchored = _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init, T)
+    anchored &= keep_walk
     init_xyt = _apply_frames(raw, starts, ends, T)
     timing["init"] = time.perf_counter() - t0
 
@@ -512,11 +511,10 @@ def optimize(
         "final_error": e_fin, "in_range": final_d < cfg.vicinity.d_max,
         "injected": used["injected"].to_numpy(),
     })
-    walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio, cfg)
+    walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio,
+                           anchored, cfg)
     walks_df["scale"] = scale
     walks_df["scale_fitted"] = scale_fitted
-    walks_df["anchored"] = anchored
-    walks_df.loc[anchored & ~walks_df["linked"].to_numpy(), "placement"] = "anchor"
     unlinked = np.flatnonzero(keep_walk & ~walks_df["linked"].to_numpy() & ~anchored)
     by_anchor = int((anchored & ~walks_df["linked"].to_numpy()).sum())
     if len(unlinked):
@@ -652,28 +650,15 @@ def _origin_init(cand_cross: pd.DataFrame, walk_of: np.ndarray, n_walks: int, re
                       np.zeros(n_walks))
 
 
-def _anchored_walks(anchors, anchor_nodes, walk_of, init: InitResult) -> np.ndarray:
-    """bool per walk: placed in the building frame by anchors — its component has >= 2 anchors more than
-    1 m apart (position and rotation), or one anchor and the walk's own magnetometer rotation."""
-    out = np.zeros(len(init.component), bool)
-    if not len(anchor_nodes):
-        return out
-    comp_a = init.component[walk_of[anchor_nodes]]
-    xy = anchors[["x_m", "y_m"]].to_numpy(float)
-    for c in np.unique(comp_a):
-        m = comp_a == c
-        spread = m.sum() >= 2 and np.ptp(xy[m], axis=0).max() > 1.0
-        walks_c = init.component == c
-        out[walks_c] = spread | np.asarray(init.heading_known, bool)[walks_c]
-    return out
-
-
-def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResult, T, raw, starts, ends):
-    """Move each component onto its anchors (SE(2) with >= 2 distinct anchors, translation with 1) by
-    updating T in place; returns (walks needing a full gauge prior, walks needing a rotation prior)."""
+def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResult, T):
+    """Move each component onto its anchors (SE(2) with >= 2 anchors more than 1 m apart, else translation)
+    by updating T in place. Returns (walks needing a full gauge prior, walks needing a rotation prior,
+    bool per walk: placed in the building frame by anchors — its component got an SE(2), or a translation
+    and the walk has its own magnetometer rotation)."""
     from rmbuild.evaluate.trajectory import align_se2, rotation_angle_rad
 
     full, rot_only = [], []
+    anchored = np.zeros(len(init.component), bool)
     n_comp = int(init.component.max()) + 1 if len(init.component) else 0
     th_ref = 0.0  # rotation the anchors gave the reference component (components are rotated in its frame)
     for c in range(n_comp):
@@ -688,6 +673,7 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
         if m.sum() >= 2 and np.ptp(dst, axis=0).max() > 1.0:
             R, t = align_se2(src, dst)
             th = rotation_angle_rad(R)
+            anchored[walks_c] = True
         else:
             # one anchor: the position only; the rotation is the reference component's (a further
             # component was turned to its magnetometer in the reference walk's frame)
@@ -695,6 +681,7 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
             c_, s_ = np.cos(th), np.sin(th)
             t = (dst - src @ np.array([[c_, -s_], [s_, c_]]).T).mean(axis=0)
             rot_only.append(root)
+            anchored[walks_c] = np.asarray(init.heading_known, bool)[walks_c]
         if c == 0:
             th_ref = th
         G = np.array([t[0], t[1], th])
@@ -702,11 +689,11 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
             c_, s_ = np.cos(G[2]), np.sin(G[2])
             x, y = T[w, 0], T[w, 1]
             T[w] = (G[0] + c_ * x - s_ * y, G[1] + s_ * x + c_ * y, np.angle(np.exp(1j * (T[w, 2] + G[2]))))
-    return full, rot_only
+    return full, rot_only, anchored
 
 
 def _walk_table(walk_ids, starts, ends, keep, init: InitResult, T, pairs, walk_of, path, extent_ratio,
-                cfg: OptimizeConfig) -> pd.DataFrame:
+                anchored: np.ndarray, cfg: OptimizeConfig) -> pd.DataFrame:
     n_walks = len(walk_ids)
     n_cross = np.zeros(n_walks, np.int64)
     n_in = np.zeros(n_walks, np.int64)
@@ -736,18 +723,20 @@ def _walk_table(walk_ids, starts, ends, keep, init: InitResult, T, pairs, walk_o
         "n_cross_pairs": n_cross, "n_partner_walks": [len(p) for p in partners], "shared_path_m": shared,
         "world_T_walk_x_m": T[:, 0], "world_T_walk_y_m": T[:, 1], "world_T_walk_theta_rad": T[:, 2],
         "heading_known": init.heading_known, "extent_ratio": extent_ratio, "confidence": conf,
-        "placement": _placement(init, linked, n_walks),
+        "placement": _placement(init, linked, anchored, n_walks), "anchored": anchored,
     })
 
 
-def _placement(init: InitResult, linked: np.ndarray, n_walks: int) -> np.ndarray:
+def _placement(init: InitResult, linked: np.ndarray, anchored: np.ndarray, n_walks: int) -> np.ndarray:
     """How each walk got its initial frame: "reference", "translation" / "se2" (walk-to-map fit with the
     compass rotation / without), "pair" (a walk-pair RANSAC edge), "merge" (its component was fitted to the
-    map as one body), "" (not linked, or an initialisation other than "grow")."""
+    map as one body), "anchor" (not linked, placed by anchors), "" (neither, or an initialisation other
+    than "grow")."""
     g = getattr(init, "grow", None)
     out = np.full(n_walks, "", dtype=object)
     if g is not None:
         out[:] = g.method
     out[init.reference] = "reference"
     out[~linked] = ""
+    out[~linked & anchored] = "anchor"
     return out
