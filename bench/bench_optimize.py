@@ -4,7 +4,8 @@ Run from the repo root: ``python -m bench.bench_optimize [--skip-large] [--skip-
 bench/results/optimize.json and prints short markdown tables. Each case runs in a fresh subprocess so
 peak memory (ru_maxrss) is per case. Sections:
 - kernels: the three eq. 10 expressions on one 2,000-pose graph (custom_factor: 1 LM iteration only);
-- cases: synthetic presets, rmbuild's pipeline beside the paper preset, 30 % false pairs, large;
+- cases: synthetic presets, rmbuild's pipeline beside the paper preset, 30 % false pairs, large (with and
+  without the chain reduction, in one run: their solve-time ratio is the reduction's gain);
 - scaling: subsets of large's walks (~2k / 10k / 50k poses) with pair search / init / solve times and
   the odometry-only sparse solve as the floor;
 - real: MS ILC site1/F1 and site2/F4 (when /work/shared/datasets exists): optimize -> export-map ->
@@ -93,6 +94,8 @@ def _config(name: str):
         cfg = dataclasses.replace(cfg, inject_false_pairs=0.3)
     if name == "ransac":  # the walk-pair RANSAC initialisation (before method "grow")
         cfg = dataclasses.replace(cfg, init=dataclasses.replace(cfg.init, method="ransac"))
+    if name == "full_graph":  # one node per step in the solve (no chain reduction), for the time ratio
+        cfg = dataclasses.replace(cfg, solve=dataclasses.replace(cfg.solve, chain_reduction=False))
     return cfg
 
 
@@ -128,7 +131,8 @@ def run_case(preset: str, mode: str, seed: int) -> dict:
     r = optimize(ds, fp, _config(mode))
     t_opt = time.perf_counter() - t1
     out = {
-        "preset": preset, "mode": mode, "seed": seed, "poses": len(ds.poses), "walks": len(ds.walks),
+        "preset": preset, "mode": mode, "seed": seed, "poses": len(ds.poses), "poses_solved": r.stats["poses_solved"],
+        "walks": len(ds.walks),
         "fingerprints": len(fp), "time_s": {**{k: round(v, 3) for k, v in r.stats["time_s"].items()},
                                             "optimize_total": round(t_opt, 3), "simulate_ingest": round(t_load, 3)},
         "factors": r.stats["factors"], "iterations": r.stats["iterations"], "linked_walks": r.stats["linked_walks"],
@@ -218,7 +222,8 @@ def kernel_bench(n_walks: int = 8, steps: int = 250, pairs_per_pose: int = 10) -
 
 
 CASES = [("default", "robust"), ("default", "paper"), ("default", "ransac"), ("default", "false30"),
-         ("corridor12", "robust"), ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust")]
+         ("corridor12", "robust"), ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust"),
+         ("large", "full_graph")]
 SCALING = [("large@2000", "robust"), ("large@10000", "robust")]  # + the full large case above
 # seed spread: `default` is one random venue per seed; a figure from one seed says little (measured: seed 7
 # is among the easiest; six seeds still moved with every knob). Each seed runs robust, paper and 30 % false
@@ -366,6 +371,12 @@ def main() -> None:
         print(f"| {c['preset']} | {c['mode']} | {c['poses']} | {lm_s} | {hd_s} | "
               f"{o['ate_m']['mean']:.2f} | {c['time_s']['pair_search']:.1f} | {c['time_s']['solve']:.1f} | "
               f"{c['time_s']['optimize_total']:.1f} | {c['odometry_floor_s']:.2f} | {c['peak_memory_mb']:.0f} |")
+    by = {(c["preset"], c["mode"]): c for c in results["cases"] if "error" not in c}
+    if ("large", "robust") in by and ("large", "full_graph") in by:
+        red, full = by[("large", "robust")], by[("large", "full_graph")]
+        print(f"\nchain reduction on large: {red['poses_solved']} of {red['poses']} poses solved, solve "
+              f"{red['time_s']['solve']:.1f} s vs {full['time_s']['solve']:.1f} s for the full graph "
+              f"({full['time_s']['solve'] / max(red['time_s']['solve'], 1e-9):.1f}x)")
     print("\n| default seed | mode | linked | landmark err mean / max m | heading err mean deg |\n"
           "|---|---|---|---|---|")
     for c in results["seeds"]:

@@ -47,6 +47,9 @@ def test_end_to_end_recovers_alignment(venue, result):
     assert list(r.poses.columns) == ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
     assert len(r.poses) == len(ds.poses) == len(r.initial_poses)
     assert r.stats["factors"]["odometry"] == len(ds.poses) - len(ds.walks)
+    # chain reduction: one node per keyframe in the solve, each walk a chain of them
+    assert r.stats["factors"]["odometry_in_solve"] == r.stats["poses_solved"] - len(ds.walks)
+    assert r.stats["poses_solved"] < 0.9 * len(ds.poses)
     assert r.stats["final_cost"] <= r.stats["initial_cost"] + 1e-9
     assert set(r.pairs["kind"]) <= {"within", "cross"}
     for k in ("pair_search", "init", "build", "solve"):

@@ -235,6 +235,13 @@ class SolveConfig:
     lm_lambda_factor: float = 10.0
     lm_fixed_lambda_factor: bool = False
     lm_diagonal_damping: bool = False
+    # chain reduction (slam/chains.py): steps that carry only odometry are eliminated before the solve;
+    # consecutive keyframes (nodes with a vicinity pair, heading prior, anchor or gauge, each walk's ends,
+    # and one node at least every keyframe_max_gap steps) are joined by the composed PDR increment with
+    # its propagated covariance, and the steps between are put back after each solve. False = one node
+    # per step in the solve (the literal graph).
+    chain_reduction: bool = True
+    keyframe_max_gap: int = 20
     # "METIS" or "COLAMD" elimination ordering (FINDINGS: METIS ~3x faster at 50k poses).
     ordering: Literal["METIS", "COLAMD"] = "METIS"
     # poses; below this COLAMD is used whatever ``ordering`` says (METIS only pays off on big graphs).
@@ -309,6 +316,8 @@ class SolveConfig:
     def validate(self) -> None:
         if self.max_iterations < 1 or self.outer_iterations < 1 or self.heading_prior_every_n < 0:
             raise ValueError("max_iterations >= 1, outer_iterations >= 1, heading_prior_every_n >= 0")
+        if self.keyframe_max_gap < 1:
+            raise ValueError("solve.keyframe_max_gap must be >= 1")
         if not (self.lm_lambda_initial > 0 and self.lm_lambda_factor > 1):
             raise ValueError("lm_lambda_initial > 0 and lm_lambda_factor > 1")
         if self.heading_prior_sigma_scale <= 0 or self.heading_prior_cauchy_k < 0:

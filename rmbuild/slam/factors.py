@@ -22,20 +22,24 @@ def W(w: int) -> int:
     return gtsam.symbol("w", int(w))
 
 
-def poses_to_values(xyt: np.ndarray, key=X) -> gtsam.Values:
-    """Values with Pose2 ``key(i)`` = (x, y, theta) of row i of ``xyt`` (n, 3) [m, m, rad]."""
+def poses_to_values(xyt: np.ndarray, key=X, nodes: np.ndarray | None = None) -> gtsam.Values:
+    """Values with Pose2 ``key(i)`` = (x, y, theta) of row i of ``xyt`` (n, 3) [m, m, rad]; with ``nodes``
+    (n,) the keys are ``key(nodes[i])`` instead."""
     v = gtsam.Values()
-    for i, (x, y, t) in enumerate(np.asarray(xyt, dtype=float)):
+    ids = range(len(xyt)) if nodes is None else np.asarray(nodes).tolist()
+    for i, (x, y, t) in zip(ids, np.asarray(xyt, dtype=float).tolist()):
         v.insert(key(i), gtsam.Pose2(x, y, t))
     return v
 
 
-def values_to_poses(values: gtsam.Values, n: int, key=X) -> np.ndarray:
-    """(n, 3) array [m, m, rad] of Pose2 ``key(0..n-1)`` (theta wrapped to (-pi, pi])."""
-    out = np.empty((n, 3))
-    for i in range(n):
+def values_to_poses(values: gtsam.Values, n: int | None = None, key=X, nodes: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) array [m, m, rad] of Pose2 ``key(0..n-1)``, or of ``key(nodes[i])`` (theta wrapped to
+    (-pi, pi])."""
+    ids = list(range(n)) if nodes is None else np.asarray(nodes).tolist()
+    out = np.empty((len(ids), 3))
+    for j, i in enumerate(ids):
         p = values.atPose2(key(i))
-        out[i] = (p.x(), p.y(), p.theta())
+        out[j] = (p.x(), p.y(), p.theta())
     return out
 
 

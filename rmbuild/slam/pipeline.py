@@ -26,9 +26,9 @@ import pandas as pd
 
 from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.errors import InputError
+from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.factors import (
     X,
-    add_odometry,
     compose_se2,
     poses_to_values,
     relative_se2,
@@ -329,8 +329,9 @@ def optimize(
     # cfg.solve.estimate_scale)
     scale = np.ones(n_walks)
     raw_s = raw
-    odo_graph = gtsam.NonlinearFactorGraph()
-    n_odo = add_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], cfg.odometry)
+    # nodes that carry a factor other than odometry: the keyframes of the chain reduction
+    required = np.zeros(n, bool)
+    required[pk] = required[pq] = True
     n_prior = 0
     ref = init.reference
     every = cfg.solve.heading_prior_every_n
@@ -352,11 +353,13 @@ def optimize(
                                              gtsam.noiseModel.Isotropic.Sigma(1, cfg.solve.gauge_sigma_rad)))
         n_prior += 1
     for w in np.flatnonzero(~keep_walk):  # skipped walks: pinned where they are
+        required[starts[w]:ends[w]] = True
         for i in range(starts[w], ends[w]):
             static.add(gtsam.PriorFactorPose2(X(i), gtsam.Pose2(*init_xyt[i]),
                                               gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
             n_prior += 1
     n_anchor = 0
+    required[anchor_nodes] = True
     for i, node in enumerate(anchor_nodes):
         static.add(gtsam.PoseTranslationPrior2D(
             X(node), gtsam.Pose2(float(anchors["x_m"].iloc[i]), float(anchors["y_m"].iloc[i]), 0.0),
@@ -375,6 +378,7 @@ def optimize(
             if not len(idx):
                 continue
             # prior heading of pose i in the common frame: its yaw_abs minus the reference frame's rotation
+            required[idx] = True
             for i in idx:
                 noise = gtsam.noiseModel.Isotropic.Sigma(1, float(ysig[i]))
                 if cfg.solve.heading_prior_cauchy_k > 0:
@@ -382,16 +386,33 @@ def optimize(
                         gtsam.noiseModel.mEstimator.Cauchy.Create(cfg.solve.heading_prior_cauchy_k), noise)
                 static.add(gtsam.PoseRotationPrior2D(X(int(i)), gtsam.Pose2(0, 0, yaw[i] - world_rot), noise))
                 n_heading += 1
+    # odometry: between consecutive steps, or between consecutive keyframes (solve.chain_reduction)
+    required[starts[keep_walk]] = True  # gauges sit on walk starts
+    if cfg.solve.chain_reduction:
+        kf = keyframe_mask(n, starts[keep_walk], ends[keep_walk], required, cfg.solve.keyframe_max_gap)
+    else:
+        kf = np.ones(n, bool)
+    kf_idx = np.flatnonzero(kf)
+    odo_graph = gtsam.NonlinearFactorGraph()
+    n_odo = add_chain_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], kf, cfg.odometry)
+
+    def to_values(xyt: np.ndarray) -> gtsam.Values:
+        return poses_to_values(xyt[kf_idx], nodes=kf_idx)
+
+    def from_values(v: gtsam.Values) -> np.ndarray:
+        full = np.zeros((n, 3))
+        full[kf_idx] = values_to_poses(v, nodes=kf_idx)
+        return fill_chains(full, raw_s, starts[keep_walk], ends[keep_walk], kf)
     timing["build"] = time.perf_counter() - t0
 
     # ------------------------------------------------------------------ joint solve, outer loop
     t0 = time.perf_counter()
     vnoise = vicinity_noise(cfg.vicinity) if cfg.vicinity.kernel != "custom_factor" else None
-    values = poses_to_values(init_xyt)
+    values = to_values(init_xyt)
     # gtsam 4.3's METIS ordering corrupts memory on graphs with isolated variables (a skipped one-pose
     # walk) and gains nothing on small graphs: COLAMD there
     ordering = cfg.solve.ordering
-    if (~keep_walk).any() or n < cfg.solve.metis_min_poses:
+    if (~keep_walk).any() or len(kf_idx) < cfg.solve.metis_min_poses:
         ordering = "COLAMD"
     cost_history: list[float] = []
     current = init_xyt
@@ -422,7 +443,7 @@ def optimize(
         iterations += it
         outer_done += 1
         n_vic_used = len(sel)
-        current = values_to_poses(values, n)
+        current = from_values(values)
         d_now = np.hypot(*(current[pk, :2] - current[pq, :2]).T)
         f_next = gnc[outer + 1] if outer + 1 < len(gnc) else 1.0
         new_active = d_now < band(f_next)
@@ -450,8 +471,8 @@ def optimize(
                 scale = new_scale
                 raw_s = scaled_raw(raw, starts, ends, scale)
                 odo_graph = gtsam.NonlinearFactorGraph()
-                add_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], cfg.odometry)
-                values = poses_to_values(moved)
+                add_chain_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], kf, cfg.odometry)
+                values = to_values(moved)
         if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved and not in_gnc):
             break
         active_pairs = new_active
@@ -465,7 +486,7 @@ def optimize(
     for k, q in zip(pk.tolist(), pq.tolist()):
         final_graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
     final_cost = float(final_graph.error(values))
-    init_cost_all = float(final_graph.error(poses_to_values(init_xyt)))
+    init_cost_all = float(final_graph.error(to_values(init_xyt)))
     timing["solve"] = time.perf_counter() - t0
 
     # ------------------------------------------------------------------ checks
@@ -532,10 +553,11 @@ def optimize(
     n_cross = int((pairs["kind"] == "cross").sum())
     stats = {
         "pipeline": cfg.pipeline,
-        "factors": {"odometry": n_odo, "vicinity": int(len(pk)), "vicinity_within": int(len(pk) - n_cross),
+        "factors": {"odometry": int((ends - starts)[keep_walk].clip(min=1).sum() - keep_walk.sum()),
+                    "odometry_in_solve": n_odo, "vicinity": int(len(pk)), "vicinity_within": int(len(pk) - n_cross),
                     "vicinity_cross": n_cross, "vicinity_in_final_solve": int(n_vic_used), "prior": n_prior,
                     "anchor": n_anchor, "heading": n_heading},
-        "walks": n_walks, "poses": n, "fingerprints": int(len(fp)),
+        "walks": n_walks, "poses": n, "poses_solved": int(len(kf_idx)), "fingerprints": int(len(fp)),
         "candidates": int(len(cand)), "candidates_cross": int(cross.sum()),
         "walk_pairs_tested": len(init.fits), "walk_pairs_accepted": int(sum(f.accepted for f in init.fits)),
         "reference_walk": walk_ids[ref], "linked_walks": int(walks_df["linked"].sum()),
