@@ -140,24 +140,29 @@ def heading_alignment_error_deg(
     return {"mean": float(e.mean()), "std": float(e.std())}
 
 
-def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True) -> dict:
+def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_walks=None) -> dict:
     """The METRICS block of ``reports/optimize.json`` for one set of poses (issue 3).
 
     ``poses_df``: walk_id, step, t_s, x_m, y_m, heading_rad in ``dataset.poses`` row order (e.g. the raw
-    poses, or the optimised ones). ``align``: one SE(2) fit of all walks onto truth first (no anchors).
-    The landmark and heading figures use that same global fit (fitted on truth poses when they exist,
-    otherwise on the fixes). Returns ``{"ate_m", "landmark_error_m", "heading_alignment_error_deg"}``
-    with ``None`` for what cannot be computed.
+    poses, or the optimised ones). ``align``: one SE(2) transform, applied to all walks together, is fitted
+    onto truth first (no anchors). It is fitted on the walks named in ``fit_walks`` (default: all) — the
+    optimiser passes the walks it linked, so that a walk it reports as unplaced (its frame arbitrary) does
+    not turn and shift every other walk's figures; that walk's own error still counts in full. The fit
+    uses the truth poses when they exist, otherwise the fixes. Returns ``{"ate_m", "landmark_error_m",
+    "heading_alignment_error_deg"}`` with ``None`` for what cannot be computed.
     """
     truth = getattr(dataset, "truth_poses", None)
     fixes = getattr(dataset, "fixes", None)
     has_truth = truth is not None and len(truth) == len(poses_df) and len(truth) > 0
+    wids = poses_df["walk_id"].astype(str).to_numpy()
+    sel = np.ones(len(poses_df), bool) if fit_walks is None else np.isin(wids, [str(w) for w in fit_walks])
     world_R, world_t = np.eye(2), np.zeros(2)
     if align:
         if has_truth:
-            world_R, world_t = align_se2(
-                poses_df[["x_m", "y_m"]].to_numpy(float), truth[["x_m", "y_m"]].to_numpy(float)
-            )
+            est = poses_df[["x_m", "y_m"]].to_numpy(float)
+            tru = truth[["x_m", "y_m"]].to_numpy(float)
+            use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
+            world_R, world_t = align_se2(est[use], tru[use])
         elif fixes is not None and len(fixes) >= 2:
             ft = fixes["t_s"].to_numpy(float)
             est = np.full((len(fixes), 2), np.nan)
@@ -166,13 +171,14 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True) -> d
                 m = fw == wid
                 est[m] = interpolate_xy(poses_df, wid, ft[m])
             ok = np.isfinite(est).all(axis=1)
+            if fit_walks is not None and (ok & np.isin(fw, list(map(str, fit_walks)))).sum() >= 2:
+                ok &= np.isin(fw, list(map(str, fit_walks)))
             if ok.sum() >= 2:
                 world_R, world_t = align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])
     out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}
     if has_truth:
-        out["ate_m"] = ate(
-            poses_df[["x_m", "y_m"]].to_numpy(float), truth[["x_m", "y_m"]].to_numpy(float), align=align
-        )
+        est = poses_df[["x_m", "y_m"]].to_numpy(float) @ world_R.T + world_t
+        out["ate_m"] = ate(est, truth[["x_m", "y_m"]].to_numpy(float), align=False)
         out["heading_alignment_error_deg"] = heading_alignment_error_deg(poses_df, truth, world_R)
     if fixes is not None and len(fixes) > 0:
         out["landmark_error_m"] = landmark_error(poses_df, fixes, world_R, world_t)
