@@ -36,6 +36,9 @@ def test_every_stage_wrote_its_outputs(tiny_ws: Path) -> None:
     opt = json.loads(ws.report_path("optimize").read_text())
     assert set(opt) >= {"factors", "walks", "poses", "time_s", "raw", "optimized"}
     assert set(opt["factors"]) >= {"odometry", "vicinity", "prior"}
+    assert opt["factors"]["odometry"] == opt["poses"] - opt["walks"]
+    assert opt["poses_solved"] <= opt["poses"]
+    assert opt["metrics_alignment"] == {"fitted_on": "linked walks", "walks": opt["linked_walks"]}
     for part in ("raw", "optimized"):
         assert set(opt[part]) == {"ate_m", "landmark_error_m", "heading_alignment_error_deg"}
     # the optimised walks are far better placed than the raw ones on the synthetic venue
