@@ -127,8 +127,8 @@ def fill_chains(xyt: np.ndarray, raw: np.ndarray, starts: np.ndarray, ends: np.n
         i, a, b = nodes[inner], a[inner], b[inner]
         fwd = compose_many(out[a], between_se2(raw[a], raw[i]))
         bwd = compose_many(out[b], between_se2(raw[b], raw[i]))
-        w = ((i - a) / (b - a))[:, None]
-        out[i, :2] = (1 - w[:, 0:1]) * fwd[:, :2] + w[:, 0:1] * bwd[:, :2]
+        w = (i - a) / (b - a)
+        out[i, :2] = (1 - w)[:, None] * fwd[:, :2] + w[:, None] * bwd[:, :2]
         dth = np.angle(np.exp(1j * (bwd[:, 2] - fwd[:, 2])))
-        out[i, 2] = np.angle(np.exp(1j * (fwd[:, 2] + w[:, 0] * dth)))
+        out[i, 2] = np.angle(np.exp(1j * (fwd[:, 2] + w * dth)))
     return out

@@ -5,10 +5,12 @@ returns an :class:`OptimizeResult`. Progress is reported through ``progress(phas
 (phases "pair_search", "init", "build", "solve"); nothing is printed.
 
 Pipeline (``cfg.pipeline``):
-- "robust": run-matched candidates → RANSAC-verified walk pairs → walk frames chained over a spanning
-  tree and refined on a walk-level graph → joint pose graph (odometry, fuzzy vicinity factors on pairs
-  consistent with the initialisation, magnetometer heading priors, gauge/anchors) solved by LM with METIS
-  in an outer loop that keeps only the pairs currently within d_max → fold/shrink and odometry checks.
+- "robust": run-matched candidates → walks grown onto the map one by one (RANSAC fits to the placed
+  walks, kNN rounds, component merging; ``init.method = "grow"``) and refined at walk level → joint pose
+  graph (odometry, fuzzy vicinity factors on pairs consistent with the initialisation, magnetometer heading
+  priors, gauge/anchors) on its keyframes (``slam/chains.py``: steps with only odometry eliminated, put
+  back after each solve) solved by LM with METIS in an outer loop that keeps only the pairs currently
+  within d_max → fold/shrink and odometry checks.
 - "paper": seed 001 — every walk at the origin, median-window pairs, one LM solve.
 """
 
