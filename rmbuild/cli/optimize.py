@@ -35,9 +35,9 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     if quiet:
         return
     f = r["factors"]
-    click.echo(f"optimized {r['walks']} walks / {r['poses']} poses: {f['odometry']} odometry, "
-               f"{f['vicinity']} vicinity, {f['prior']} prior factors in {r['time_s'].get('stage_total', 0):.1f} s "
-               f"(gauge: {r['gauge']})")
+    click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
+               f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "
+               f"{r['time_s'].get('stage_total', 0):.1f} s (gauge: {r['gauge']})")
     for name in ("raw", "optimized"):
         m = r.get(name) or {}
         lm = m.get("landmark_error_m")
