@@ -171,8 +171,9 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
                 m = fw == wid
                 est[m] = interpolate_xy(poses_df, wid, ft[m])
             ok = np.isfinite(est).all(axis=1)
-            if fit_walks is not None and (ok & np.isin(fw, list(map(str, fit_walks)))).sum() >= 2:
-                ok &= np.isin(fw, list(map(str, fit_walks)))
+            if fit_walks is not None:
+                named = ok & np.isin(fw, [str(w) for w in fit_walks])
+                ok = named if named.sum() >= 2 else ok
             if ok.sum() >= 2:
                 world_R, world_t = align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])
     out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}

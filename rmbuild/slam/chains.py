@@ -18,7 +18,7 @@ import gtsam
 import numpy as np
 
 from rmbuild.config.optimize import OdometryConfig
-from rmbuild.slam.factors import X
+from rmbuild.slam.factors import X, between_se2, compose_many
 
 
 def keyframe_mask(n: int, starts: np.ndarray, ends: np.ndarray, required: np.ndarray, max_gap: int) -> np.ndarray:
@@ -41,20 +41,6 @@ def keyframe_mask(n: int, starts: np.ndarray, ends: np.ndarray, required: np.nda
             k = int(np.ceil(g / max_gap))
             kf[s + g0 + np.round(np.arange(1, k) * g / k).astype(int)] = True
     return kf
-
-
-def between_se2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """p⁻¹ · q for pose arrays p, q (m, 3): q in p's body frame."""
-    d = q[:, :2] - p[:, :2]
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.angle(np.exp(1j * (q[:, 2] - p[:, 2])))]
-
-
-def compose_many(p: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """p · u for pose arrays p, u (m, 3)."""
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.c_[p[:, 0] + c * u[:, 0] - s * u[:, 1], p[:, 1] + s * u[:, 0] + c * u[:, 1],
-                 np.angle(np.exp(1j * (p[:, 2] + u[:, 2])))]
 
 
 def _segments(starts: np.ndarray, ends: np.ndarray, kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

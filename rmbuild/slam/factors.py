@@ -43,22 +43,29 @@ def values_to_poses(values: gtsam.Values, n: int | None = None, key=X, nodes: np
     return out
 
 
+def between_se2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """p⁻¹ · q for pose arrays p, q (m, 3) [m, m, rad]: q in p's body frame."""
+    d = q[:, :2] - p[:, :2]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.angle(np.exp(1j * (q[:, 2] - p[:, 2])))]
+
+
+def compose_many(p: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """p · u for pose arrays p, u (m, 3) [m, m, rad]."""
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.c_[p[:, 0] + c * u[:, 0] - s * u[:, 1], p[:, 1] + s * u[:, 0] + c * u[:, 1],
+                 np.angle(np.exp(1j * (p[:, 2] + u[:, 2])))]
+
+
 def compose_se2(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     """T (3,) = (x, y, theta) applied to poses p (n, 3): world poses of walk-frame poses."""
-    c, s = np.cos(T[2]), np.sin(T[2])
-    out = np.empty_like(p, dtype=float)
-    out[:, 0] = T[0] + c * p[:, 0] - s * p[:, 1]
-    out[:, 1] = T[1] + s * p[:, 0] + c * p[:, 1]
-    out[:, 2] = np.angle(np.exp(1j * (p[:, 2] + T[2])))
-    return out
+    p = np.asarray(p, dtype=float)
+    return compose_many(np.broadcast_to(np.asarray(T, dtype=float), p.shape), p)
 
 
 def relative_se2(p: np.ndarray) -> np.ndarray:
     """Body-frame increments (n-1, 3) between consecutive poses p (n, 3) (seed 001 eq. 6)."""
-    d = p[1:, :2] - p[:-1, :2]
-    c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
-    return np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
-                 np.angle(np.exp(1j * (p[1:, 2] - p[:-1, 2])))]
+    return between_se2(p[:-1], p[1:])
 
 
 def odometry_noise(ocfg: OdometryConfig) -> gtsam.noiseModel.Base:

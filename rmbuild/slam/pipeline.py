@@ -708,11 +708,7 @@ def _place_with_anchors(init_xyt, anchors, anchor_nodes, walk_of, init: InitResu
             anchored[walks_c] = np.asarray(init.heading_known, bool)[walks_c]
         if c == 0:
             th_ref = th
-        G = np.array([t[0], t[1], th])
-        for w in walks_c:
-            c_, s_ = np.cos(G[2]), np.sin(G[2])
-            x, y = T[w, 0], T[w, 1]
-            T[w] = (G[0] + c_ * x - s_ * y, G[1] + s_ * x + c_ * y, np.angle(np.exp(1j * (T[w, 2] + G[2]))))
+        T[walks_c] = compose_se2(np.array([t[0], t[1], th]), T[walks_c])
     return full, rot_only, anchored
 
 
