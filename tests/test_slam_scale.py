@@ -38,11 +38,22 @@ def test_scaled_walk_recovered():
     assert r.stats["scale"]["estimated"]
 
 
-def test_scale_off_by_default_reports_ones():
+def test_scale_off_reports_ones():
     ds, fp = make_venue(n_walks=3, steps_per_walk=120, seed=1)
-    r = optimize(ds, fp, OptimizeConfig())
+    r = optimize(ds, fp, OptimizeConfig(solve=SolveConfig(estimate_scale=False)))
     assert np.all(r.walks["scale"] == 1.0)
     assert not r.walks["scale_fitted"].any()
+    assert not r.stats["scale"]["estimated"]
+
+
+def test_short_span_is_not_fitted():
+    """Pairs spread over less than scale_min_span_m leave s_w at 1 (a few metres of pair spread would
+    swamp a few per cent of stretch)."""
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-10, 10, (60, 2))
+    f = fit_stretch(a, 1.1 * a, 1.0, SolveConfig(scale_min_span_m=60.0))
+    assert not f.ok and f.ratio == 1.0
+    assert fit_stretch(a, 1.1 * a, 1.0, SolveConfig(scale_min_span_m=20.0, scale_prior_sigma=10.0)).ok
 
 
 def test_closed_form_helpers():
@@ -54,5 +65,5 @@ def test_closed_form_helpers():
     assert increment_scale(raw, out) == pytest.approx(0.8, rel=1e-9)
     a = rng.uniform(-20, 20, (60, 2))
     b = 3.0 + 1.1 * a + rng.normal(0, 1.0, a.shape)
-    f = fit_stretch(a, b, 1.0, SolveConfig(scale_prior_sigma=10.0))
+    f = fit_stretch(a, b, 1.0, SolveConfig(scale_prior_sigma=10.0, scale_min_span_m=15.0))
     assert f.ok and f.ratio == pytest.approx(1.1, abs=0.02)
