@@ -228,8 +228,11 @@ class InitConfig:
 
 @dataclass(frozen=True)
 class SolveConfig:
-    # Levenberg-Marquardt iterations per solve, and its relative / absolute cost-decrease stops.
-    max_iterations: int = 15
+    # Levenberg-Marquardt iterations per solve, and its relative / absolute cost-decrease stops. Each solve
+    # but the last is followed by another (outer loop, scale rounds) that starts where it stopped: 10
+    # instead of 15 leaves twelve tuning and twelve held-out venues and ILC F1 where they were and takes
+    # `large` 47.4 -> 40.3 s (same run; 41 -> 36 iterations).
+    max_iterations: int = 10
     relative_error_tol: float = 1e-3
     absolute_error_tol: float = 1e-6
     # Levenberg-Marquardt damping schedule (gtsam's LevenbergMarquardtParams): the first lambda, the factor
