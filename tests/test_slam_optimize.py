@@ -69,6 +69,9 @@ def test_paper_preset_runs(venue):
     fp2.node = old_to_new[fp2.node]
     r = optimize(ds2, fp2, paper_config())
     assert r.stats["pipeline"] == "paper" and r.stats["factors"]["vicinity"] > 0
+    # the published model: one node per step, no step-length scale
+    assert r.stats["poses_solved"] == r.stats["poses"] and not r.stats["scale"]["estimated"]
+    assert not paper_config().solve.estimate_scale
 
 
 def test_anchors_put_map_in_building_frame(venue):

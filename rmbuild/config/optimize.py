@@ -387,6 +387,7 @@ def paper_config(**overrides) -> OptimizeConfig:
         # keyframe factors linearise differently enough to move its folded solutions: twelve seeds
         # landmark mean 6.32 m as written, 6.81 m reduced)
         solve=SolveConfig(outer_iterations=1, heading_prior_every_n=0, max_iterations=50,
-                          max_odometry_rms_sigma=1e9, min_extent_ratio=0.0, chain_reduction=False),
+                          max_odometry_rms_sigma=1e9, min_extent_ratio=0.0, chain_reduction=False,
+                          estimate_scale=False),
     )
     return replace(cfg, **overrides)
