@@ -29,6 +29,8 @@ def test_type_and_range_errors() -> None:
     with pytest.raises(ConfigError, match="unknown key 'gap'"):
         from_dict(IngestConfig, {"gap": 1})
     assert from_dict(IngestConfig, {"max_attach_gap_s": 3}).max_attach_gap_s == 3.0
+    with pytest.raises(ConfigError, match="scale_min_span_m and solve.scale_pair_gate_m must be >= 0"):
+        from_dict(SECTIONS["optimize"], {"solve": {"scale_min_span_m": -5.0}}, "optimize")
 
 
 def test_file_layers(tmp_path: Path) -> None:

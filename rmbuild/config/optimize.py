@@ -350,6 +350,8 @@ class SolveConfig:
             raise ValueError("need 0 < scale_min <= 1 <= scale_max and scale_prior_sigma > 0")
         if self.scale_iterations < 0 or self.scale_tol < 0 or self.scale_min_pairs < 3 or self.scale_robust_m <= 0:
             raise ValueError("scale_iterations >= 0, scale_tol >= 0, scale_min_pairs >= 3, scale_robust_m > 0")
+        if self.scale_min_span_m < 0 or self.scale_pair_gate_m < 0:
+            raise ValueError("solve.scale_min_span_m and solve.scale_pair_gate_m must be >= 0")
 
 
 @dataclass(frozen=True)
