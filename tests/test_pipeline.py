@@ -121,3 +121,30 @@ def test_rerunning_a_stage_needs_force(tiny_ws: Path, capsys) -> None:
     assert r.code == 2 and "pass --force" in r.err
     assert (ws / "map" / "radiomap.parquet").read_bytes() == before
     assert run_cli(capsys, "export-map", "-w", ws, "--force", "-q").code == 0
+
+
+def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    import shutil
+
+    ws = tmp_path / "ws"
+    shutil.copytree(tiny_ws / "ws", ws)
+
+    def run(*extra):
+        r = run_cli(capsys, "optimize", "-w", ws, "--force", *extra)
+        assert r.code == 0, r.err
+        rep = json.loads((ws / "reports" / "optimize.json").read_text())
+        walks = pd.read_parquet(ws / "optimize" / "walks.parquet")
+        assert rep["scale"]["estimated"] and rep["scale"]["fitted_walks"] == int(walks["scale_fitted"].sum())
+        return [ln for ln in r.out.splitlines() if "step-length scale" in ln], walks
+
+    # the tiny venue's walks span less than the default 60 m: nothing fitted, nothing printed
+    line, walks = run()
+    assert not walks["scale_fitted"].any() and (walks["scale"] == 1.0).all() and line == []
+    # with a 10 m span some are, and the summary gives their range
+    cfg = tmp_path / "scale.toml"
+    cfg.write_text("[optimize.solve]\nscale_min_span_m = 10.0\n")
+    line, walks = run("--config", cfg)
+    fitted = walks.loc[walks["scale_fitted"], "scale"]
+    assert len(fitted) > 0
+    assert line == [f"  step-length scale fitted on {len(fitted)} walk(s): {fitted.min():.3f}-{fitted.max():.3f} "
+                    "(optimize/walks.parquet: scale)"]

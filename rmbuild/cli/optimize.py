@@ -38,6 +38,10 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
                f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "
                f"{r['time_s'].get('stage_total', 0):.1f} s (gauge: {r['gauge']})")
+    sc = r.get("scale") or {}
+    if sc.get("fitted_walks"):
+        click.echo(f"  step-length scale fitted on {sc['fitted_walks']} walk(s): {sc['min']:.3f}-{sc['max']:.3f} "
+                   "(optimize/walks.parquet: scale)")
     for name in ("raw", "optimized"):
         m = r.get(name) or {}
         lm = m.get("landmark_error_m")

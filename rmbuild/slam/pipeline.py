@@ -570,7 +570,9 @@ def optimize(
         "odometry_residual_rms_sigma": odo_rms, "median_extent_ratio": float(np.nanmedian(extent_ratio)),
         "rejected": rejected, "time_s": timing, "warnings": warnings,
         "scale": {"estimated": bool(est_scale), "rounds": scale_rounds, "fitted_walks": int(scale_fitted.sum()),
-                  "min": float(scale.min()) if n_walks else 1.0, "max": float(scale.max()) if n_walks else 1.0},
+                  # over the fitted walks (the others keep 1)
+                  "min": float(scale[scale_fitted].min()) if scale_fitted.any() else 1.0,
+                  "max": float(scale[scale_fitted].max()) if scale_fitted.any() else 1.0},
     }
     return OptimizeResult(
         poses=_poses_df(dataset, current), initial_poses=_poses_df(dataset, init_xyt), pairs=pairs,
