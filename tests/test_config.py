@@ -31,6 +31,8 @@ def test_type_and_range_errors() -> None:
     assert from_dict(IngestConfig, {"max_attach_gap_s": 3}).max_attach_gap_s == 3.0
     with pytest.raises(ConfigError, match="scale_min_span_m and solve.scale_pair_gate_m must be >= 0"):
         from_dict(SECTIONS["optimize"], {"solve": {"scale_min_span_m": -5.0}}, "optimize")
+    with pytest.raises(ConfigError, match="scale_max_iterations must be >= scale_iterations"):
+        from_dict(SECTIONS["optimize"], {"solve": {"scale_iterations": 4, "scale_max_iterations": 3}}, "optimize")
 
 
 def test_file_layers(tmp_path: Path) -> None:

@@ -313,6 +313,12 @@ class SolveConfig:
     # instead of 39 s.
     scale_iterations: int = 2
     scale_tol: float = 0.005
+    # further rounds, up to scale_max_iterations in all, while the last round still moved some s_w by more
+    # than scale_extend_move: a stretch far from converged (an uncalibrated phone step length; `default
+    # --raw-imu` seed 7 landmark mean 2.30 m after 2 rounds, 1.37 m after 8), where a foot IMU's few per
+    # cent have settled (measured below and in docs/optimize.md). 0 = always scale_max_iterations rounds.
+    scale_max_iterations: int = 8
+    scale_extend_move: float = 0.03
     # a walk's scale is fitted only with at least this many in-range cross pairs spread over at least
     # scale_min_span_m of its solved path (extent of the paired nodes); otherwise s_w stays. Over a short
     # span the pairs' metres of spread swamp a few per cent of stretch: ILC F1 (~30 s walks) with 15 m
@@ -350,6 +356,8 @@ class SolveConfig:
             raise ValueError("need 0 < scale_min <= 1 <= scale_max and scale_prior_sigma > 0")
         if self.scale_iterations < 0 or self.scale_tol < 0 or self.scale_min_pairs < 3 or self.scale_robust_m <= 0:
             raise ValueError("scale_iterations >= 0, scale_tol >= 0, scale_min_pairs >= 3, scale_robust_m > 0")
+        if self.scale_max_iterations < self.scale_iterations or self.scale_extend_move < 0:
+            raise ValueError("solve.scale_max_iterations must be >= scale_iterations and scale_extend_move >= 0")
         if self.scale_min_span_m < 0 or self.scale_pair_gate_m < 0:
             raise ValueError("solve.scale_min_span_m and solve.scale_pair_gate_m must be >= 0")
 

@@ -424,10 +424,15 @@ def optimize(
     n_vic_used = 0
     outer_done = 0
     est_scale = cfg.solve.estimate_scale and not paper
+    # solves: the widened ones, the outer loop's and one per scale round; a scale round beyond
+    # scale_iterations (while the last one still moved some s_w by > scale_extend_move) adds one
     n_solves = len(gnc) + cfg.solve.outer_iterations + (cfg.solve.scale_iterations if est_scale else 0)
     scale_rounds = 0
+    scale_last_move = 0.0
     scale_fitted = np.zeros(n_walks, bool)
-    for outer in range(n_solves):
+    outer = -1
+    while outer + 1 < n_solves:
+        outer += 1
         # graduated kernel: widened band (same slope) for the first len(gnc) solves, long-walk pairs only
         f_band = gnc[outer] if outer < len(gnc) else 1.0
         wide_cfg = replace(vc, d_max=vc.d_min + f_band * (vc.d_max - vc.d_min), e_max=f_band * vc.e_max)
@@ -452,7 +457,9 @@ def optimize(
         last = outer == n_solves - 1
         in_gnc = outer < len(gnc)  # a widened solve is always followed by the next one
         scale_moved = False
-        if est_scale and not last and scale_rounds < cfg.solve.scale_iterations:
+        extend = (est_scale and cfg.solve.scale_iterations <= scale_rounds < cfg.solve.scale_max_iterations
+                  and scale_last_move > cfg.solve.scale_extend_move)
+        if est_scale and ((not last and scale_rounds < cfg.solve.scale_iterations) or extend):
             eligible = keep_walk & init.linked
             sgate = cfg.solve.scale_pair_gate_m or cfg.vicinity.d_max
             near = d_now < sgate
@@ -461,7 +468,11 @@ def optimize(
                                               cfg.solve.scale_normalize and not len(anchor_nodes))
             scale_fitted |= fitted
             scale_rounds += 1
-            scale_moved = bool(np.max(np.abs(new_scale - scale), initial=0.0) > cfg.solve.scale_tol)
+            scale_last_move = float(np.max(np.abs(new_scale - scale), initial=0.0))
+            scale_moved = scale_last_move > cfg.solve.scale_tol
+            if extend and scale_moved:
+                n_solves += 1  # the rescaled graph is solved once more
+                last = False
             log.debug("scale round %d: %s", scale_rounds, np.round(new_scale, 3).tolist())
             if scale_moved:
                 # start the next solve from the current poses stretched about each walk's centroid
