@@ -311,8 +311,7 @@ def optimize(
     # graduated kernel (solve.gnc_factors): pairs touching a walk long enough to drift get a widened band
     # in the first solves; every other pair keeps d_max throughout
     gnc = () if paper else tuple(cfg.solve.gnc_factors)
-    walk_len = np.zeros(n_walks)
-    np.maximum.at(walk_len, walk_of, path)
+    walk_len = walked_lengths(path, walk_of, n_walks)
     widen = (walk_len[walk_of[nk_all]] >= cfg.solve.gnc_min_walk_m) | (walk_len[walk_of[nq_all]] >=
                                                                           cfg.solve.gnc_min_walk_m)
     vc = cfg.vicinity
@@ -430,9 +429,8 @@ def optimize(
     scale_rounds = 0
     scale_last_move = 0.0
     scale_fitted = np.zeros(n_walks, bool)
-    outer = -1
-    while outer + 1 < n_solves:
-        outer += 1
+    outer = 0
+    while outer < n_solves:
         # graduated kernel: widened band (same slope) for the first len(gnc) solves, long-walk pairs only
         f_band = gnc[outer] if outer < len(gnc) else 1.0
         wide_cfg = replace(vc, d_max=vc.d_min + f_band * (vc.d_max - vc.d_min), e_max=f_band * vc.e_max)
@@ -489,6 +487,7 @@ def optimize(
         if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved and not in_gnc):
             break
         active_pairs = new_active
+        outer += 1
     # the last solve's pairs are "the vicinity factors finally used"
     use = np.zeros(len(cand), bool)
     use[pool_idx[active_pairs]] = True
