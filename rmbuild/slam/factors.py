@@ -156,3 +156,36 @@ def vicinity_factor(k: int, q: int, vcfg: VicinityConfig, noise=None) -> gtsam.N
     noise = noise if noise is not None else vicinity_noise(vcfg)
     measured = vcfg.d_min if vcfg.kernel == "range_tls" else 0.0
     return gtsam.RangeFactorPose2(X(k), X(q), measured, noise)
+
+
+
+# the rotation part of an anisotropic pair factor carries no information (its sigma, rad)
+_FREE_ROT_SIGMA = 1e3
+
+
+def pair_offsets(xyt: np.ndarray, k: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(along, across, θq - θk) of pairs (k, q) at poses xyt (n, 3): q's offset from k in q's heading frame
+    (m) and the relative heading (rad, wrapped)."""
+    d = xyt[q, :2] - xyt[k, :2]
+    c, s = np.cos(xyt[q, 2]), np.sin(xyt[q, 2])
+    rel = np.angle(np.exp(1j * (xyt[q, 2] - xyt[k, 2])))
+    return c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], rel
+
+
+def anisotropic_noise(vcfg: VicinityConfig, across_ratio: float) -> gtsam.noiseModel.Base:
+    """Robust noise of an anisotropic pair factor (:func:`anisotropic_factor`): eq. 10's ramp sigma along
+    the walking direction, across_ratio times it across, a free rotation; truncated at the Mahalanobis
+    radius e_max·sqrt(Ω), where eq. 10 turns flat (kernel range_tls, d_min = 0)."""
+    sigma = _ramp_sigma(vcfg)
+    base = gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma, across_ratio * sigma, _FREE_ROT_SIGMA]))
+    est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(vcfg.e_max * np.sqrt(vcfg.omega_wifi))
+    return gtsam.noiseModel.Robust.Create(est, base)
+
+
+def anisotropic_factor(k: int, q: int, rel_theta: float, noise) -> gtsam.NonlinearFactor:
+    """A pair factor between nodes k and q whose error is q's offset from k in q's heading frame.
+
+    BetweenFactorPose2 with measured (0, 0, rel_theta): the translation of its error is
+    R(-θk - rel_theta)·(t_q - t_k), the offset in q's frame when rel_theta is the current θq - θk; the
+    rotation error then stays near 0, where the Pose2 log map leaves the translation as it is."""
+    return gtsam.BetweenFactorPose2(X(k), X(q), gtsam.Pose2(0.0, 0.0, float(rel_theta)), noise)

@@ -26,12 +26,15 @@ import gtsam
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.config.optimize import OptimizeConfig, VicinityConfig
 from rmbuild.errors import InputError
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.factors import (
     X,
+    anisotropic_factor,
+    anisotropic_noise,
     compose_se2,
+    pair_offsets,
     poses_to_values,
     relative_se2,
     values_to_poses,
@@ -60,7 +63,8 @@ class OptimizeResult:
     ``poses`` / ``initial_poses``: walk_id, step, t_s, x_m, y_m, heading_rad in the common frame (the
     reference walk's own frame, or the building frame with anchors), rows as ``dataset.poses``.
     ``pairs``: the vicinity factors of the final solve: node_k, node_q, walk_k, walk_q, kind, rss_dist,
-    common, init_dist_m, final_dist_m, final_error (eq. 10 e), in_range (d < d_max at the end).
+    common, init_dist_m, final_dist_m, final_error (eq. 10 e), in_range (d < d_max at the end), injected,
+    anisotropic (an along/across factor, VicinityConfig.across_ratio).
     ``candidates``: every pair the search produced (before verification), with ``used`` and ``injected``.
     ``walks``: per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, shared_path_m,
     n_partner_walks, world_T_walk_x_m / _y_m / _theta_rad, extent_ratio, confidence (0-1), heading_known,
@@ -75,6 +79,28 @@ class OptimizeResult:
     walks: pd.DataFrame
     stats: dict
     cost_history: list[float] = field(default_factory=list)
+
+
+def _parallel(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfig,
+              across: float) -> tuple[np.ndarray, np.ndarray]:
+    """(mask, θq - θk): which pairs get an anisotropic factor (nodes walking within parallel_max_deg of
+    parallel or antiparallel; none when the across ratio is 1) and their current relative heading."""
+    _, _, rel = pair_offsets(xyt, k, q)
+    if across >= 1:
+        return np.zeros(len(k), bool), rel
+    return np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg)), rel
+
+
+def estimate_across_ratio(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfig) -> tuple[float, int]:
+    """(ratio, n): RMS across / RMS along of the offsets of the (anti)parallel pairs among (k, q) that are
+    within d_max at poses xyt, clamped to [across_ratio_min, 1]; 1 when fewer than across_min_pairs."""
+    along, acr, rel = pair_offsets(xyt, k, q)
+    m = (np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg))) & (np.hypot(along, acr) < vcfg.d_max)
+    n = int(m.sum())
+    if n < vcfg.across_min_pairs:
+        return 1.0, n
+    ratio = math.sqrt(float(np.mean(acr[m] ** 2)) / max(float(np.mean(along[m] ** 2)), 1e-12))
+    return float(np.clip(ratio, vcfg.across_ratio_min, 1.0)), n
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -409,6 +435,12 @@ def optimize(
     # ------------------------------------------------------------------ joint solve, outer loop
     t0 = time.perf_counter()
     vnoise = vicinity_noise(cfg.vicinity) if cfg.vicinity.kernel != "custom_factor" else None
+    # anisotropic pairs (VicinityConfig.across_ratio): a fixed ratio, or 1 (isotropic) until it is
+    # estimated once the scale rounds are over; across_used: the ratio of the latest solve
+    aniso_ok = not paper and vc.kernel == "range_tls" and vc.d_min == 0
+    across = across_used = vc.across_ratio if aniso_ok and vc.across_ratio > 0 else 1.0
+    across_auto = aniso_ok and vc.across_ratio == 0
+    across_n = 0
     values = to_values(init_xyt)
     # gtsam 4.3's METIS ordering corrupts memory on graphs with isolated variables (a skipped one-pose
     # walk) and gains nothing on small graphs: COLAMD there
@@ -439,8 +471,15 @@ def optimize(
         graph.push_back(static)
         sel = np.flatnonzero(active_pairs)
         wide_sel = widen[pool_idx[sel]] & (f_band != 1.0)
-        for k, q, wd in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist()):
-            graph.add(vicinity_factor(k, q, wide_cfg, wide_noise) if wd else vicinity_factor(k, q, vc, vnoise))
+        across_used = across
+        par, rel = _parallel(current, pk[sel], pq[sel], vc, across)
+        anoise = anisotropic_noise(vc, across) if par.any() else None
+        for k, q, wd, pa, rt in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist(), par.tolist(),
+                                    rel.tolist()):
+            if pa and not wd:
+                graph.add(anisotropic_factor(k, q, rt, anoise))
+            else:
+                graph.add(vicinity_factor(k, q, wide_cfg, wide_noise) if wd else vicinity_factor(k, q, vc, vnoise))
         if initial_cost is None:
             initial_cost = float(graph.error(values))
             cost_history.append(initial_cost)
@@ -484,7 +523,21 @@ def optimize(
                 odo_graph = gtsam.NonlinearFactorGraph()
                 add_chain_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], kf, cfg.odometry)
                 values = to_values(moved)
-        if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved and not in_gnc):
+        # the across ratio is estimated once the scale rounds are over (anisotropic pairs hold a walk's
+        # stretch in place: with them from the start the scales stall short of the truth)
+        across_moved = False
+        scale_busy = est_scale and (scale_rounds < cfg.solve.scale_iterations or (
+            scale_rounds < cfg.solve.scale_max_iterations and scale_last_move > cfg.solve.scale_extend_move))
+        if across_auto and not (scale_busy and not last):
+            across_new, across_n = estimate_across_ratio(current, pk[new_active], pq[new_active], vc)
+            across_moved = abs(across_new - across) > vc.across_tol
+            if across_moved and last and across == 1.0 and across_new < 1.0:
+                n_solves += 1  # the first anisotropic solve comes after the last isotropic one
+                last = False
+            across = across_new
+            log.debug("across ratio %.3f from %d parallel pairs", across, across_n)
+        if paper or last or (np.array_equal(new_active, active_pairs) and not scale_moved and not in_gnc
+                                  and not across_moved):
             break
         active_pairs = new_active
         outer += 1
@@ -495,8 +548,10 @@ def optimize(
     pk, pq = nk_all[use], nq_all[use]
     final_graph = gtsam.NonlinearFactorGraph(odo_graph)
     final_graph.push_back(static)
-    for k, q in zip(pk.tolist(), pq.tolist()):
-        final_graph.add(vicinity_factor(k, q, cfg.vicinity, vnoise))
+    par, rel = _parallel(current, pk, pq, cfg.vicinity, across_used)
+    anoise = anisotropic_noise(cfg.vicinity, across_used) if par.any() else None
+    for k, q, pa, rt in zip(pk.tolist(), pq.tolist(), par.tolist(), rel.tolist()):
+        final_graph.add(anisotropic_factor(k, q, rt, anoise) if pa else vicinity_factor(k, q, cfg.vicinity, vnoise))
     final_cost = float(final_graph.error(values))
     init_cost_all = float(final_graph.error(to_values(init_xyt)))
     timing["solve"] = time.perf_counter() - t0
@@ -542,7 +597,7 @@ def optimize(
         "kind": used["kind"].to_numpy(), "rss_dist": used["rss_dist"].to_numpy(),
         "common": used["common"].to_numpy(), "init_dist_m": d_init[use], "final_dist_m": final_d,
         "final_error": e_fin, "in_range": final_d < cfg.vicinity.d_max,
-        "injected": used["injected"].to_numpy(),
+        "injected": used["injected"].to_numpy(), "anisotropic": par,
     })
     walks_df = _walk_table(walk_ids, starts, ends, keep_walk, init, T, pairs, walk_of, path, extent_ratio,
                            anchored, cfg)
@@ -579,6 +634,9 @@ def optimize(
         "iterations": iterations, "outer_iterations": outer_done, "ordering": ordering, "cost_history": cost_history,
         "odometry_residual_rms_sigma": odo_rms, "median_extent_ratio": float(np.nanmedian(extent_ratio)),
         "rejected": rejected, "time_s": timing, "warnings": warnings,
+        # the anisotropic pairs of the final solve and their across/along sigma ratio (1 = isotropic)
+        "vicinity": {"across_ratio": float(across_used), "estimated": bool(across_auto),
+                     "estimated_from_pairs": across_n, "anisotropic_pairs": int(par.sum())},
         "scale": {"estimated": bool(est_scale), "rounds": scale_rounds, "fitted_walks": int(scale_fitted.sum()),
                   # over the fitted walks (the others keep 1)
                   "min": float(scale[scale_fitted].min()) if scale_fitted.any() else 1.0,
