@@ -148,3 +148,31 @@ def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path,
     assert len(fitted) > 0
     assert line == [f"  step-length scale fitted on {len(fitted)} walk(s): {fitted.min():.3f}-{fitted.max():.3f} "
                     "(optimize/walks.parquet: scale)"]
+
+
+def test_optimize_summary_names_the_anisotropic_pairs(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    import shutil
+
+    ws = tmp_path / "ws"
+    shutil.copytree(tiny_ws / "ws", ws)
+
+    def run(*extra):
+        r = run_cli(capsys, "optimize", "-w", ws, "--force", *extra)
+        assert r.code == 0, r.err
+        rep = json.loads((ws / "reports" / "optimize.json").read_text())
+        pairs = pd.read_parquet(ws / "optimize" / "pairs.parquet")
+        assert rep["vicinity"]["anisotropic_pairs"] == int(pairs["anisotropic"].sum())
+        return [ln for ln in r.out.splitlines() if "anisotropic pairs" in ln], rep, pairs
+
+    # a fixed ratio: every (anti)parallel pair of the final solve is anisotropic and the summary says so
+    cfg = tmp_path / "aniso.toml"
+    cfg.write_text("[optimize.vicinity]\nacross_ratio = 0.4\n")
+    line, rep, pairs = run("--config", cfg)
+    n = int(pairs["anisotropic"].sum())
+    assert n > 0 and rep["vicinity"]["across_ratio"] == 0.4 and not rep["vicinity"]["estimated"]
+    assert line == [f"  anisotropic pairs: {n} of {rep['factors']['vicinity']}, sigma across/along 0.40 "
+                    "(set; optimize/pairs.parquet: anisotropic)"]
+    # isotropic: none, and no line
+    cfg.write_text("[optimize.vicinity]\nacross_ratio = 1.0\n")
+    line, rep, pairs = run("--config", cfg)
+    assert line == [] and not pairs["anisotropic"].any()

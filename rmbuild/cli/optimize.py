@@ -42,6 +42,11 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     if sc.get("fitted_walks"):
         click.echo(f"  step-length scale fitted on {sc['fitted_walks']} walk(s): {sc['min']:.3f}-{sc['max']:.3f} "
                    "(optimize/walks.parquet: scale)")
+    vi = r.get("vicinity") or {}
+    if vi.get("anisotropic_pairs"):
+        how = "estimated" if vi.get("estimated") else "set"
+        click.echo(f"  anisotropic pairs: {vi['anisotropic_pairs']} of {f['vicinity']}, sigma across/along "
+                   f"{vi['across_ratio']:.2f} ({how}; optimize/pairs.parquet: anisotropic)")
     for name in ("raw", "optimized"):
         m = r.get(name) or {}
         lm = m.get("landmark_error_m")
