@@ -123,7 +123,9 @@ def test_rerunning_a_stage_needs_force(tiny_ws: Path, capsys) -> None:
     assert run_cli(capsys, "export-map", "-w", ws, "--force", "-q").code == 0
 
 
-def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+def _optimize_copy(tiny_ws: Path, tmp_path: Path, capsys, grep: str):
+    """A copy of the tiny workspace and a function that re-optimizes it (extra CLI args) and returns
+    (summary lines containing ``grep``, optimize report, walks table, pairs table)."""
     import shutil
 
     ws = tmp_path / "ws"
@@ -134,45 +136,40 @@ def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path,
         assert r.code == 0, r.err
         rep = json.loads((ws / "reports" / "optimize.json").read_text())
         walks = pd.read_parquet(ws / "optimize" / "walks.parquet")
-        assert rep["scale"]["estimated"] and rep["scale"]["fitted_walks"] == int(walks["scale_fitted"].sum())
-        return [ln for ln in r.out.splitlines() if "step-length scale" in ln], walks
+        pairs = pd.read_parquet(ws / "optimize" / "pairs.parquet")
+        return [ln for ln in r.out.splitlines() if grep in ln], rep, walks, pairs
 
+    return run
+
+
+def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    run = _optimize_copy(tiny_ws, tmp_path, capsys, "step-length scale")
     # the tiny venue's walks span less than the default 60 m: nothing fitted, nothing printed
-    line, walks = run()
+    line, rep, walks, _ = run()
+    assert rep["scale"]["estimated"] and rep["scale"]["fitted_walks"] == 0
     assert not walks["scale_fitted"].any() and (walks["scale"] == 1.0).all() and line == []
     # with a 10 m span some are, and the summary gives their range
     cfg = tmp_path / "scale.toml"
     cfg.write_text("[optimize.solve]\nscale_min_span_m = 10.0\n")
-    line, walks = run("--config", cfg)
+    line, rep, walks, _ = run("--config", cfg)
     fitted = walks.loc[walks["scale_fitted"], "scale"]
-    assert len(fitted) > 0
+    assert len(fitted) > 0 and rep["scale"]["fitted_walks"] == len(fitted)
     assert line == [f"  step-length scale fitted on {len(fitted)} walk(s): {fitted.min():.3f}-{fitted.max():.3f} "
                     "(optimize/walks.parquet: scale)"]
 
 
 def test_optimize_summary_names_the_anisotropic_pairs(tiny_ws: Path, tmp_path: Path, capsys) -> None:
-    import shutil
-
-    ws = tmp_path / "ws"
-    shutil.copytree(tiny_ws / "ws", ws)
-
-    def run(*extra):
-        r = run_cli(capsys, "optimize", "-w", ws, "--force", *extra)
-        assert r.code == 0, r.err
-        rep = json.loads((ws / "reports" / "optimize.json").read_text())
-        pairs = pd.read_parquet(ws / "optimize" / "pairs.parquet")
-        assert rep["vicinity"]["anisotropic_pairs"] == int(pairs["anisotropic"].sum())
-        return [ln for ln in r.out.splitlines() if "anisotropic pairs" in ln], rep, pairs
-
+    run = _optimize_copy(tiny_ws, tmp_path, capsys, "anisotropic pairs")
     # a fixed ratio: every (anti)parallel pair of the final solve is anisotropic and the summary says so
     cfg = tmp_path / "aniso.toml"
     cfg.write_text("[optimize.vicinity]\nacross_ratio = 0.4\n")
-    line, rep, pairs = run("--config", cfg)
+    line, rep, _, pairs = run("--config", cfg)
     n = int(pairs["anisotropic"].sum())
-    assert n > 0 and rep["vicinity"]["across_ratio"] == 0.4 and not rep["vicinity"]["estimated"]
+    assert n > 0 and rep["vicinity"]["anisotropic_pairs"] == n
+    assert rep["vicinity"]["across_ratio"] == 0.4 and not rep["vicinity"]["estimated"]
     assert line == [f"  anisotropic pairs: {n} of {rep['factors']['vicinity']}, sigma across/along 0.40 "
                     "(set; optimize/pairs.parquet: anisotropic)"]
     # isotropic: none, and no line
     cfg.write_text("[optimize.vicinity]\nacross_ratio = 1.0\n")
-    line, rep, pairs = run("--config", cfg)
-    assert line == [] and not pairs["anisotropic"].any()
+    line, rep, _, pairs = run("--config", cfg)
+    assert line == [] and not pairs["anisotropic"].any() and rep["vicinity"]["anisotropic_pairs"] == 0
