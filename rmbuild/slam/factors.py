@@ -158,7 +158,6 @@ def vicinity_factor(k: int, q: int, vcfg: VicinityConfig, noise=None) -> gtsam.N
     return gtsam.RangeFactorPose2(X(k), X(q), measured, noise)
 
 
-
 # the rotation part of an anisotropic pair factor carries no information (its sigma, rad)
 _FREE_ROT_SIGMA = 1e3
 
