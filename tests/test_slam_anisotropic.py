@@ -101,3 +101,18 @@ def test_paper_preset_stays_isotropic():
 def test_config_rejects_bad_values(kw):
     with pytest.raises(ValueError):
         VicinityConfig(**kw).validate()
+
+
+def test_headings_off_the_walking_direction_keep_pairs_isotropic():
+    """Poses whose heading is not where the walk goes (a device yaw 90 deg off, say) would put the
+    along/across axes the wrong way round: the pairs then stay isotropic, with a warning."""
+    import dataclasses
+
+    ds, fp = make_venue(n_walks=5, steps_per_walk=260, seed=1)
+    poses = ds.poses.copy()
+    poses["heading_rad"] = poses["heading_rad"] + np.pi / 2
+    r = optimize(dataclasses.replace(ds, poses=poses), fp, OptimizeConfig())
+    assert r.stats["vicinity"]["anisotropic_pairs"] == 0 and r.stats["vicinity"]["across_ratio"] == 1.0
+    assert any("walking direction (median 90 deg" in w for w in r.stats["warnings"])
+    ok = optimize(ds, fp, OptimizeConfig())
+    assert not any("walking direction" in w for w in ok.stats["warnings"])

@@ -119,12 +119,18 @@ class VicinityConfig:
     across_min_pairs: int = 50
     across_tol: float = 0.02
     parallel_max_deg: float = 10.0
+    # deg; the along/across axes are the poses' headings. When those differ from the direction the walk
+    # moves in by more than this (median over steps: e.g. a device yaw, not a step heading) the pairs stay
+    # isotropic, with a warning.
+    heading_motion_max_deg: float = 20.0
 
     def validate(self) -> None:
         if not 0 <= self.d_min < self.d_max:
             raise ValueError("need 0 <= d_min < d_max")
         if not 0 <= self.across_ratio <= 1 or not 0 < self.across_ratio_min <= 1:
             raise ValueError("need 0 <= across_ratio <= 1 and 0 < across_ratio_min <= 1")
+        if not 0 <= self.heading_motion_max_deg <= 180:
+            raise ValueError("need 0 <= heading_motion_max_deg <= 180")
         if not 0 <= self.parallel_max_deg < 90 or self.across_min_pairs < 1 or self.across_tol < 0:
             raise ValueError("need 0 <= parallel_max_deg < 90, across_min_pairs >= 1 and across_tol >= 0")
         if self.e_max <= 0 or self.omega_wifi <= 0:

@@ -91,6 +91,20 @@ def _parallel(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfi
     return np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg)), rel
 
 
+def heading_motion_deviation_deg(raw: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> float:
+    """Median |heading - direction of motion| (deg) over the steps of the walks [starts, ends) that move
+    by at least 0.1 m: pose i's heading against the direction from pose i-1 to pose i (0 for step-based
+    PDR, whose steps go where the heading points; NaN-free 0 when nothing moves)."""
+    diffs = []
+    for s, e in zip(starts.tolist(), ends.tolist()):
+        d = np.diff(raw[s:e, :2], axis=0)
+        moving = np.hypot(d[:, 0], d[:, 1]) >= 0.1
+        motion = np.arctan2(d[moving, 1], d[moving, 0])
+        diffs.append(np.abs(np.angle(np.exp(1j * (raw[s + 1:e, 2][moving] - motion)))))
+    allv = np.concatenate(diffs) if diffs else np.zeros(0)
+    return float(np.degrees(np.median(allv))) if len(allv) else 0.0
+
+
 def estimate_across_ratio(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfig) -> tuple[float, int]:
     """(ratio, n): RMS across / RMS along of the offsets of the (anti)parallel pairs among (k, q) that are
     within d_max at poses xyt, clamped to [across_ratio_min, 1]; 1 when fewer than across_min_pairs."""
@@ -438,6 +452,13 @@ def optimize(
     # anisotropic pairs (VicinityConfig.across_ratio): a fixed ratio, or 1 (isotropic) until it is
     # estimated once the scale rounds are over; across_used: the ratio of the latest solve
     aniso_ok = not paper and vc.kernel == "range_tls" and vc.d_min == 0
+    if aniso_ok and vc.across_ratio < 1:
+        # the along/across axes are the poses' headings: they must be the walking direction
+        dev = heading_motion_deviation_deg(raw, starts[keep_walk], ends[keep_walk])
+        if dev > vc.heading_motion_max_deg:
+            aniso_ok = False
+            warnings.append(f"pose headings differ from the walking direction (median {dev:.0f} deg > "
+                            f"{vc.heading_motion_max_deg:g}): anisotropic pairs off, every pair isotropic")
     across = across_used = vc.across_ratio if aniso_ok and vc.across_ratio > 0 else 1.0
     across_auto = aniso_ok and vc.across_ratio == 0
     across_n = 0
