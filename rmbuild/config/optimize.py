@@ -102,18 +102,20 @@ class VicinityConfig:
     # that match in Wi-Fi are metres apart along it but about its width apart across it: on the synthetic
     # venues the true offsets of such pairs are 2.4-2.9 m RMS along, 0.9-1.7 m across). Its error is the
     # offset of one node from the other in that node's heading frame, truncated where eq. 10 is (at the
-    # Mahalanobis radius e_max·sqrt(Ω)). 0 = estimated from the data: the solves are isotropic until the
-    # scale rounds are over (with anisotropic pairs from the start the step-length scales stall short of
-    # the truth: `default --raw-imu` 1.38 -> 1.55 m), then after each solve the ratio is set to RMS
-    # across / RMS along of the parallel pairs within d_max, clamped to [across_ratio_min, 1], from at
-    # least across_min_pairs pairs (else 1); a change by more than across_tol asks for one more solve
-    # (within the solve budget; the first switch from isotropic gets one of its own). 1 = isotropic, eq.
-    # 10 for every pair (the paper). Needs kernel range_tls and d_min = 0, else the pairs stay isotropic.
+    # Mahalanobis radius e_max·sqrt(Ω)). 0 = estimated from the data: the first solve is isotropic,
+    # then after each solve the ratio is set to RMS across / RMS along of the parallel pairs within d_max,
+    # clamped to [across_ratio_min, 1], from at least across_min_pairs pairs (else 1); a change by more
+    # than across_tol asks for one more solve (within the solve budget; the first switch from isotropic
+    # gets one of its own). The pairs of a walk whose step-length scale moved by more than
+    # solve.scale_extend_move in the last scale round stay isotropic while the rounds go on: anisotropic
+    # pairs hold a walk's stretch in place and its scale stalls short of the truth (`default --raw-imu`
+    # 1.38 -> 1.55 m with every pair anisotropic from the second solve). 1 = isotropic, eq. 10 for every
+    # pair (the paper). Needs kernel range_tls and d_min = 0, else the pairs stay isotropic.
     # Measured (isotropic -> estimated; landmark mean m / heading mean deg): twelve tuning venues
-    # 1.19 / 1.38 -> 0.97 / 1.06, twelve held-out 1.37 / 2.19 -> 1.19 / 2.09, 30 % false pairs
-    # 1.40 -> 1.17 m, `large` 1.01 -> 0.85 m (max 4.7 -> 7.4 m); ILC F1 (estimate 0.48) waypoint mean
-    # 6.9 -> 7.1-7.5 m, built-map kNN median 8.4-8.8 m either way. A fixed 0.3 from the start: twelve
-    # venues 0.97 m / 1.04 deg but ILC F1 7.4-8.0 m; parallel_max_deg 5 / 20: 0.99 / 0.95 m.
+    # 1.19 / 1.38 -> 0.91 / 1.03, twelve held-out 1.37 / 2.19 -> 1.19 / 2.01, 30 % false pairs
+    # 1.40 -> 1.11 m, `large` 1.01 -> 0.86 m (max 4.7 -> 8.2 m), `--raw-imu` 1.38 -> 1.39 m; ILC F1
+    # (estimate 0.50) waypoint mean 6.9 -> 6.9 m, built-map kNN median 8.8 -> 8.1 m. A fixed 0.3 from the
+    # start: twelve venues 0.97 m / 1.04 deg but ILC F1 7.4-8.0 m; parallel_max_deg 5 / 20: 0.99 / 0.95 m.
     across_ratio: float = 0.0
     across_ratio_min: float = 0.25
     across_min_pairs: int = 50

@@ -450,7 +450,7 @@ def optimize(
     t0 = time.perf_counter()
     vnoise = vicinity_noise(cfg.vicinity) if cfg.vicinity.kernel != "custom_factor" else None
     # anisotropic pairs (VicinityConfig.across_ratio): a fixed ratio, or 1 (isotropic) until it is
-    # estimated once the scale rounds are over; across_used: the ratio of the latest solve
+    # estimated after the first solve; across_used: the ratio of the latest solve
     aniso_ok = not paper and vc.kernel == "range_tls" and vc.d_min == 0
     if aniso_ok and vc.across_ratio < 1:
         # the along/across axes are the poses' headings: they must be the walking direction
@@ -461,6 +461,10 @@ def optimize(
                             f"{vc.heading_motion_max_deg:g}): anisotropic pairs off, every pair isotropic")
     across = across_used = vc.across_ratio if aniso_ok and vc.across_ratio > 0 else 1.0
     across_auto = aniso_ok and vc.across_ratio == 0
+    # walks whose step-length scale is still moving (by > scale_extend_move in the last round, while the
+    # rounds go on): their pairs stay isotropic, since anisotropic pairs hold a walk's stretch in place
+    # and its scale would stall short of the truth
+    settling = settling_used = np.zeros(n_walks, bool)
     across_n = 0
     values = to_values(init_xyt)
     # gtsam 4.3's METIS ordering corrupts memory on graphs with isolated variables (a skipped one-pose
@@ -492,8 +496,9 @@ def optimize(
         graph.push_back(static)
         sel = np.flatnonzero(active_pairs)
         wide_sel = widen[pool_idx[sel]] & (f_band != 1.0)
-        across_used = across
+        across_used, settling_used = across, settling.copy()
         par, rel = _parallel(current, pk[sel], pq[sel], vc, across)
+        par &= ~(settling[walk_of[pk[sel]]] | settling[walk_of[pq[sel]]])
         anoise = anisotropic_noise(vc, across) if par.any() else None
         for k, q, wd, pa, rt in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist(), par.tolist(),
                                     rel.tolist()):
@@ -527,6 +532,7 @@ def optimize(
             scale_fitted |= fitted
             scale_rounds += 1
             scale_last_move = float(np.max(np.abs(new_scale - scale), initial=0.0))
+            settling = np.abs(new_scale - scale) > cfg.solve.scale_extend_move
             scale_moved = scale_last_move > cfg.solve.scale_tol
             if extend and scale_moved:
                 n_solves += 1  # the rescaled graph is solved once more
@@ -544,12 +550,13 @@ def optimize(
                 odo_graph = gtsam.NonlinearFactorGraph()
                 add_chain_odometry(odo_graph, raw_s, starts[keep_walk], ends[keep_walk], kf, cfg.odometry)
                 values = to_values(moved)
-        # the across ratio is estimated once the scale rounds are over (anisotropic pairs hold a walk's
-        # stretch in place: with them from the start the scales stall short of the truth)
+        # the across ratio is re-estimated after every solve
         across_moved = False
         scale_busy = est_scale and (scale_rounds < cfg.solve.scale_iterations or (
             scale_rounds < cfg.solve.scale_max_iterations and scale_last_move > cfg.solve.scale_extend_move))
-        if across_auto and not (scale_busy and not last):
+        if not scale_busy:
+            settling[:] = False
+        if across_auto:
             across_new, across_n = estimate_across_ratio(current, pk[new_active], pq[new_active], vc)
             across_moved = abs(across_new - across) > vc.across_tol
             if across_moved and last and across == 1.0 and across_new < 1.0:
@@ -570,6 +577,7 @@ def optimize(
     final_graph = gtsam.NonlinearFactorGraph(odo_graph)
     final_graph.push_back(static)
     par, rel = _parallel(current, pk, pq, cfg.vicinity, across_used)
+    par &= ~(settling_used[walk_of[pk]] | settling_used[walk_of[pq]])
     anoise = anisotropic_noise(cfg.vicinity, across_used) if par.any() else None
     for k, q, pa, rt in zip(pk.tolist(), pq.tolist(), par.tolist(), rel.tolist()):
         final_graph.add(anisotropic_factor(k, q, rt, anoise) if pa else vicinity_factor(k, q, cfg.vicinity, vnoise))
