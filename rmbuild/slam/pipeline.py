@@ -93,8 +93,8 @@ def _parallel(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfi
 
 def heading_motion_deviation_deg(raw: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> float:
     """Median |heading - direction of motion| (deg) over the steps of the walks [starts, ends) that move
-    by at least 0.1 m: pose i's heading against the direction from pose i-1 to pose i (0 for step-based
-    PDR, whose steps go where the heading points; NaN-free 0 when nothing moves)."""
+    by at least 0.1 m: pose i's heading against the direction from pose i-1 to pose i. 0 for step-based
+    PDR, whose steps go where the heading points, and when no step moves."""
     diffs = []
     for s, e in zip(starts.tolist(), ends.tolist()):
         d = np.diff(raw[s:e, :2], axis=0)
@@ -464,7 +464,8 @@ def optimize(
     # walks whose step-length scale is still moving (by > scale_extend_move in the last round, while the
     # rounds go on): their pairs stay isotropic, since anisotropic pairs hold a walk's stretch in place
     # and its scale would stall short of the truth
-    settling = settling_used = np.zeros(n_walks, bool)
+    settling = np.zeros(n_walks, bool)
+    settling_used = settling.copy()
     across_n = 0
     values = to_values(init_xyt)
     # gtsam 4.3's METIS ordering corrupts memory on graphs with isolated variables (a skipped one-pose
