@@ -151,3 +151,18 @@ def test_interrupted_save_leaves_no_recording(tmp_path: Path) -> None:
         v.log_cost(0, 1.0)
         raise RuntimeError("boom")
     assert not path.exists() and not list(tmp_path.iterdir())
+
+
+def test_vicinity_labels_name_the_anisotropic_pairs(tmp_path: Path) -> None:
+    """Each vicinity segment's label carries its kind, "anisotropic" for an along/across factor, and its
+    error."""
+    pairs = pd.DataFrame({"node_k": [0, 1, 2], "node_q": [3, 4, 5], "kind": ["cross", "cross", "within"],
+                          "final_error": [0.1, 0.5, 0.2], "anisotropic": [True, False, True]})
+    node_xy = np.arange(12.0).reshape(6, 2)
+    logged = []
+    with open_viewer(ViewTarget("save", tmp_path / "v.rrd")) as v:
+        log = v.rec.log
+        v.rec.log = lambda path, ent, **kw: (logged.append((path, ent)), log(path, ent, **kw))[1]
+        assert v.log_vicinity(pairs, node_xy) == 3
+    (ent,) = [e for p, e in logged if p.endswith("/vicinity")]
+    assert ent.labels.pa_array.to_pylist() == ["cross anisotropic e=0.1", "cross e=0.5", "within anisotropic e=0.2"]

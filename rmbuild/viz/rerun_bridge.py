@@ -391,7 +391,8 @@ class Viewer:
     def log_vicinity(self, pairs: pd.DataFrame, node_xy: np.ndarray, max_lines: int = MAX_VICINITY_LINES,
                      error_scale: float | None = None, seed: int = 0) -> int:
         """Vicinity factors as segments between their nodes' positions ``node_xy`` (n_nodes, 2), coloured
-        by ``final_error`` (green low -> red at ``error_scale``, default the 95th percentile).
+        by ``final_error`` (green low -> red at ``error_scale``, default the 95th percentile), labelled with
+        their kind (and "anisotropic" for along/across factors) and error.
 
         When there are more than ``max_lines`` pairs, the worst 20 % of the sample are the pairs with the
         largest errors (so false matches stay visible) and the rest a seeded random sample. Returns the
@@ -422,6 +423,9 @@ class Viewer:
             fin = e[np.isfinite(e)]
             error_scale = float(np.percentile(fin, 95)) if fin.size else 1.0
         kind = pairs["kind"].astype(str).to_numpy()[idx] if "kind" in pairs else np.full(len(idx), "")
+        if "anisotropic" in pairs:  # an along/across factor (VicinityConfig.across_ratio)
+            kind = np.where(pairs["anisotropic"].to_numpy(bool)[idx], np.char.add(kind.astype(str), " anisotropic"),
+                            kind)
         labels = [f"{kd} e={v:.3g}" for kd, v in zip(kind, e)]
         self.rec.log(f"{FLOOR}/vicinity", self.rr.LineStrips2D(seg, colors=error_colors(e, error_scale),
                                                                 radii=[0.05], labels=labels, show_labels=False),
