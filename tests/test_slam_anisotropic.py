@@ -116,6 +116,15 @@ def test_headings_off_the_walking_direction_keep_pairs_isotropic():
     assert any("walking direction (median 90 deg" in w for w in r.stats["warnings"])
     ok = optimize(ds, fp, OptimizeConfig())
     assert not any("walking direction" in w for w in ok.stats["warnings"])
+    # one walk off: only its pairs stay isotropic
+    poses = ds.poses.copy()
+    one = poses["walk_id"] == "w001"
+    poses.loc[one, "heading_rad"] = poses.loc[one, "heading_rad"] + np.pi / 2
+    r = optimize(dataclasses.replace(ds, poses=poses), fp, OptimizeConfig())
+    touches = (r.pairs["walk_k"] == "w001") | (r.pairs["walk_q"] == "w001")
+    assert touches.any() and not r.pairs.loc[touches, "anisotropic"].any()
+    assert r.pairs.loc[~touches, "anisotropic"].sum() > 0.3 * (~touches).sum()
+    assert any("1 walk(s) whose pose headings differ" in w and "w001" in w for w in r.stats["warnings"])
 
 
 def test_a_stretched_walk_still_gets_its_scale():

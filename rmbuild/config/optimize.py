@@ -121,9 +121,9 @@ class VicinityConfig:
     across_min_pairs: int = 50
     across_tol: float = 0.02
     parallel_max_deg: float = 10.0
-    # deg; the along/across axes are the poses' headings. When those differ from the direction the walk
-    # moves in by more than this (median over steps: e.g. a device yaw, not a step heading) the pairs stay
-    # isotropic, with a warning.
+    # deg; the along/across axes are the poses' headings. A walk whose headings differ from the direction
+    # it moves in by more than this (median over its steps: e.g. a device yaw, not a step heading) keeps
+    # isotropic pairs, with a warning.
     heading_motion_max_deg: float = 20.0
 
     def validate(self) -> None:

@@ -91,18 +91,18 @@ def _parallel(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfi
     return np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg)), rel
 
 
-def heading_motion_deviation_deg(raw: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> float:
-    """Median |heading - direction of motion| (deg) over the steps of the walks [starts, ends) that move
-    by at least 0.1 m: pose i's heading against the direction from pose i-1 to pose i. 0 for step-based
-    PDR, whose steps go where the heading points, and when no step moves."""
-    diffs = []
-    for s, e in zip(starts.tolist(), ends.tolist()):
+def heading_motion_deviation_deg(raw: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Per walk [starts, ends): the median |heading - direction of motion| (deg) over its steps that move
+    by at least 0.1 m, pose i's heading against the direction from pose i-1 to pose i. 0 for step-based
+    PDR, whose steps go where the heading points, and for a walk with no moving step."""
+    out = np.zeros(len(starts))
+    for w, (s, e) in enumerate(zip(starts.tolist(), ends.tolist())):
         d = np.diff(raw[s:e, :2], axis=0)
         moving = np.hypot(d[:, 0], d[:, 1]) >= 0.1
-        motion = np.arctan2(d[moving, 1], d[moving, 0])
-        diffs.append(np.abs(np.angle(np.exp(1j * (raw[s + 1:e, 2][moving] - motion)))))
-    allv = np.concatenate(diffs) if diffs else np.zeros(0)
-    return float(np.degrees(np.median(allv))) if len(allv) else 0.0
+        if moving.any():
+            motion = np.arctan2(d[moving, 1], d[moving, 0])
+            out[w] = np.degrees(np.median(np.abs(np.angle(np.exp(1j * (raw[s + 1:e, 2][moving] - motion))))))
+    return out
 
 
 def estimate_across_ratio(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfig) -> tuple[float, int]:
@@ -452,13 +452,21 @@ def optimize(
     # anisotropic pairs (VicinityConfig.across_ratio): a fixed ratio, or 1 (isotropic) until it is
     # estimated after the first solve; across_used: the ratio of the latest solve
     aniso_ok = not paper and vc.kernel == "range_tls" and vc.d_min == 0
+    # the along/across axes are the poses' headings: they must be the walking direction. A walk whose
+    # headings are not (a device yaw, say) keeps isotropic pairs; when no walk's are, all pairs are
+    heading_off = np.zeros(n_walks, bool)
     if aniso_ok and vc.across_ratio < 1:
-        # the along/across axes are the poses' headings: they must be the walking direction
-        dev = heading_motion_deviation_deg(raw, starts[keep_walk], ends[keep_walk])
-        if dev > vc.heading_motion_max_deg:
+        dev = heading_motion_deviation_deg(raw, starts, ends)
+        heading_off = keep_walk & (dev > vc.heading_motion_max_deg)
+        if heading_off.any() and heading_off.sum() == keep_walk.sum():
             aniso_ok = False
-            warnings.append(f"pose headings differ from the walking direction (median {dev:.0f} deg > "
-                            f"{vc.heading_motion_max_deg:g}): anisotropic pairs off, every pair isotropic")
+            warnings.append(f"pose headings differ from the walking direction (median {np.median(dev[keep_walk]):.0f} "
+                            f"deg > {vc.heading_motion_max_deg:g}): anisotropic pairs off, every pair isotropic")
+        elif heading_off.any():
+            names = ", ".join(walk_ids[w] for w in np.flatnonzero(heading_off)[:5])
+            warnings.append(f"{int(heading_off.sum())} walk(s) whose pose headings differ from the walking "
+                            f"direction (median > {vc.heading_motion_max_deg:g} deg: {names}"
+                            f"{', ...' if heading_off.sum() > 5 else ''}) keep isotropic pairs")
     across = across_used = vc.across_ratio if aniso_ok and vc.across_ratio > 0 else 1.0
     across_auto = aniso_ok and vc.across_ratio == 0
     # walks whose step-length scale is still moving (by > scale_extend_move in the last round, while the
@@ -499,7 +507,8 @@ def optimize(
         wide_sel = widen[pool_idx[sel]] & (f_band != 1.0)
         across_used, settling_used = across, settling.copy()
         par, rel = _parallel(current, pk[sel], pq[sel], vc, across)
-        par &= ~(settling[walk_of[pk[sel]]] | settling[walk_of[pq[sel]]])
+        iso_walk = settling | heading_off
+        par &= ~(iso_walk[walk_of[pk[sel]]] | iso_walk[walk_of[pq[sel]]])
         anoise = anisotropic_noise(vc, across) if par.any() else None
         for k, q, wd, pa, rt in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist(), par.tolist(),
                                     rel.tolist()):
@@ -558,7 +567,8 @@ def optimize(
         if not scale_busy:
             settling[:] = False
         if across_auto:
-            across_new, across_n = estimate_across_ratio(current, pk[new_active], pq[new_active], vc)
+            stat = new_active & ~(heading_off[walk_of[pk]] | heading_off[walk_of[pq]])
+            across_new, across_n = estimate_across_ratio(current, pk[stat], pq[stat], vc)
             across_moved = abs(across_new - across) > vc.across_tol
             if across_moved and last and across == 1.0 and across_new < 1.0:
                 n_solves += 1  # the first anisotropic solve comes after the last isotropic one
@@ -578,7 +588,8 @@ def optimize(
     final_graph = gtsam.NonlinearFactorGraph(odo_graph)
     final_graph.push_back(static)
     par, rel = _parallel(current, pk, pq, cfg.vicinity, across_used)
-    par &= ~(settling_used[walk_of[pk]] | settling_used[walk_of[pq]])
+    iso_walk = settling_used | heading_off
+    par &= ~(iso_walk[walk_of[pk]] | iso_walk[walk_of[pq]])
     anoise = anisotropic_noise(cfg.vicinity, across_used) if par.any() else None
     for k, q, pa, rt in zip(pk.tolist(), pq.tolist(), par.tolist(), rel.tolist()):
         final_graph.add(anisotropic_factor(k, q, rt, anoise) if pa else vicinity_factor(k, q, cfg.vicinity, vnoise))
