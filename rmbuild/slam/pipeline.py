@@ -81,14 +81,21 @@ class OptimizeResult:
     cost_history: list[float] = field(default_factory=list)
 
 
-def _parallel(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: VicinityConfig,
-              across: float) -> tuple[np.ndarray, np.ndarray]:
-    """(mask, θq - θk): which pairs get an anisotropic factor (nodes walking within parallel_max_deg of
-    parallel or antiparallel; none when the across ratio is 1) and their current relative heading."""
+def _is_parallel(rel: np.ndarray, vcfg: VicinityConfig) -> np.ndarray:
+    """Relative headings (rad) within parallel_max_deg of parallel or antiparallel."""
+    return np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg))
+
+
+def _anisotropic_pairs(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, walk_of: np.ndarray, iso_walk: np.ndarray,
+                       vcfg: VicinityConfig, across: float):
+    """(mask, θq - θk, noise): which pairs (k, q) get an anisotropic factor at poses xyt — (anti)parallel,
+    neither node on an ``iso_walk`` walk, none when the across ratio is 1 —, their current relative
+    heading and the shared noise model (None when no pair does)."""
     _, _, rel = pair_offsets(xyt, k, q)
     if across >= 1:
-        return np.zeros(len(k), bool), rel
-    return np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg)), rel
+        return np.zeros(len(k), bool), rel, None
+    par = _is_parallel(rel, vcfg) & ~(iso_walk[walk_of[k]] | iso_walk[walk_of[q]])
+    return par, rel, (anisotropic_noise(vcfg, across) if par.any() else None)
 
 
 def heading_motion_deviation_deg(raw: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
@@ -109,7 +116,7 @@ def estimate_across_ratio(xyt: np.ndarray, k: np.ndarray, q: np.ndarray, vcfg: V
     """(ratio, n): RMS across / RMS along of the offsets of the (anti)parallel pairs among (k, q) that are
     within d_max at poses xyt, clamped to [across_ratio_min, 1]; 1 when fewer than across_min_pairs."""
     along, acr, rel = pair_offsets(xyt, k, q)
-    m = (np.abs(np.cos(rel)) >= np.cos(np.radians(vcfg.parallel_max_deg))) & (np.hypot(along, acr) < vcfg.d_max)
+    m = _is_parallel(rel, vcfg) & (np.hypot(along, acr) < vcfg.d_max)
     n = int(m.sum())
     if n < vcfg.across_min_pairs:
         return 1.0, n
@@ -506,10 +513,7 @@ def optimize(
         sel = np.flatnonzero(active_pairs)
         wide_sel = widen[pool_idx[sel]] & (f_band != 1.0)
         across_used, settling_used = across, settling.copy()
-        par, rel = _parallel(current, pk[sel], pq[sel], vc, across)
-        iso_walk = settling | heading_off
-        par &= ~(iso_walk[walk_of[pk[sel]]] | iso_walk[walk_of[pq[sel]]])
-        anoise = anisotropic_noise(vc, across) if par.any() else None
+        par, rel, anoise = _anisotropic_pairs(current, pk[sel], pq[sel], walk_of, settling | heading_off, vc, across)
         for k, q, wd, pa, rt in zip(pk[sel].tolist(), pq[sel].tolist(), wide_sel.tolist(), par.tolist(),
                                     rel.tolist()):
             if pa and not wd:
@@ -587,12 +591,9 @@ def optimize(
     pk, pq = nk_all[use], nq_all[use]
     final_graph = gtsam.NonlinearFactorGraph(odo_graph)
     final_graph.push_back(static)
-    par, rel = _parallel(current, pk, pq, cfg.vicinity, across_used)
-    iso_walk = settling_used | heading_off
-    par &= ~(iso_walk[walk_of[pk]] | iso_walk[walk_of[pq]])
-    anoise = anisotropic_noise(cfg.vicinity, across_used) if par.any() else None
+    par, rel, anoise = _anisotropic_pairs(current, pk, pq, walk_of, settling_used | heading_off, vc, across_used)
     for k, q, pa, rt in zip(pk.tolist(), pq.tolist(), par.tolist(), rel.tolist()):
-        final_graph.add(anisotropic_factor(k, q, rt, anoise) if pa else vicinity_factor(k, q, cfg.vicinity, vnoise))
+        final_graph.add(anisotropic_factor(k, q, rt, anoise) if pa else vicinity_factor(k, q, vc, vnoise))
     final_cost = float(final_graph.error(values))
     init_cost_all = float(final_graph.error(to_values(init_xyt)))
     timing["solve"] = time.perf_counter() - t0
