@@ -1,9 +1,8 @@
-"""Benchmark of `rmbuild optimize` (issue 3): kernels, accuracy vs truth, robustness, scaling.
+"""Benchmark of `rmbuild optimize`: accuracy vs truth, robustness, scaling.
 
 Run from the repo root: ``python -m bench.bench_optimize [--skip-large] [--skip-real]``. Writes
 bench/results/optimize.json and prints short markdown tables. Each case runs in a fresh subprocess so
 peak memory (ru_maxrss) is per case. Sections:
-- kernels: the three eq. 10 expressions on one 2,000-pose graph (custom_factor: 1 LM iteration only);
 - cases: synthetic presets, rmbuild's pipeline beside the paper preset, 30 % false pairs, large (with and
   without the chain reduction, in one run: their solve-time ratio is the reduction's gain);
 - seeds / holdout: twelve `default` venues (robust, paper, 30 % false pairs) and twelve held-out ones
@@ -87,18 +86,18 @@ def _load(preset: str, seed: int):
 
 
 def _config(name: str):
+    """(config, candidates hook) of a mode: robust, paper, false30 (30 % of the Wi-Fi candidates replaced
+    by random cross-walk pairs), full_graph (one node per step in the solve, for the chain reduction's
+    time ratio)."""
     from rmbuild.config.optimize import OptimizeConfig, paper_config
+    from rmbuild.slam.testing import false_pairs
 
     if name == "paper":
-        return paper_config()
+        return paper_config(), None
     cfg = OptimizeConfig()
-    if name == "false30":
-        cfg = dataclasses.replace(cfg, inject_false_pairs=0.3)
-    if name == "ransac":  # the walk-pair RANSAC initialisation (before method "grow")
-        cfg = dataclasses.replace(cfg, init=dataclasses.replace(cfg.init, method="ransac"))
-    if name == "full_graph":  # one node per step in the solve (no chain reduction), for the time ratio
+    if name == "full_graph":
         cfg = dataclasses.replace(cfg, solve=dataclasses.replace(cfg.solve, chain_reduction=False))
-    return cfg
+    return cfg, (false_pairs(0.3) if name == "false30" else None)
 
 
 def _odometry_floor(ds) -> float:
@@ -130,7 +129,8 @@ def run_case(preset: str, mode: str, seed: int) -> dict:
     ds, fp = _load(preset, seed)
     t_load = time.perf_counter() - t0
     t1 = time.perf_counter()
-    r = optimize(ds, fp, _config(mode))
+    cfg, hook = _config(mode)
+    r = optimize(ds, fp, cfg, candidates_hook=hook)
     t_opt = time.perf_counter() - t1
     linked = r.walks.loc[r.walks["linked"].astype(bool), "walk_id"].astype(str).tolist() or None
     out = {
@@ -178,55 +178,7 @@ def _linked_metrics(r, ds) -> dict | None:
             "unlinked_mean_m": float(e[~m].mean()) if (~m).any() else None}
 
 
-def kernel_bench(n_walks: int = 8, steps: int = 250, pairs_per_pose: int = 10) -> list[dict]:
-    """Linearise and LM time of the same graph with each eq. 10 kernel (true pairs, 10 per pose)."""
-    import gtsam
-    from scipy.spatial import cKDTree
-
-    from rmbuild.config.optimize import OptimizeConfig, VicinityConfig
-    from rmbuild.slam.factors import X, add_odometry, poses_to_values, vicinity_factor, vicinity_noise
-    from rmbuild.slam.testing import make_venue
-
-    ds, _ = make_venue(n_walks=n_walks, steps_per_walk=steps, seed=5)
-    tr = ds.truth_poses[["x_m", "y_m"]].to_numpy()
-    _, nb = cKDTree(tr).query(tr, pairs_per_pose + 1)
-    pk = np.repeat(np.arange(len(tr)), pairs_per_pose)
-    pq = nb[:, 1:].ravel()
-    truth = np.c_[tr, ds.truth_poses["heading_rad"].to_numpy()]
-    rng = np.random.default_rng(0)
-    start = truth + np.c_[rng.normal(0, 1.0, (len(tr), 2)), rng.normal(0, 0.02, len(tr))]
-    out = []
-    for kernel in ("range_tls", "range_custom", "custom_factor"):
-        vc = VicinityConfig(d_min=1.0, d_max=6.0, kernel=kernel)
-        g = gtsam.NonlinearFactorGraph()
-        sl = ds.walk_slices()
-        add_odometry(g, truth, np.array([s.start for s in sl.values()]), np.array([s.stop for s in sl.values()]),
-                     OptimizeConfig().odometry)
-        g.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*truth[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
-        noise = vicinity_noise(vc) if kernel != "custom_factor" else None
-        for k, q in zip(pk.tolist(), pq.tolist()):
-            g.add(vicinity_factor(k, q, vc, noise))
-        v = poses_to_values(start)
-        reps = 1 if kernel == "custom_factor" else 3
-        t = time.perf_counter()
-        for _ in range(reps):
-            g.linearize(v)
-        t_lin = (time.perf_counter() - t) / reps
-        p = gtsam.LevenbergMarquardtParams()
-        # the Python CustomFactor costs minutes per LM iteration (GTSAM copies the Values per call)
-        p.setMaxIterations(1 if kernel == "custom_factor" else 10)
-        t = time.perf_counter()
-        opt = gtsam.LevenbergMarquardtOptimizer(g, v, p)
-        res = opt.optimize()
-        t_lm = time.perf_counter() - t
-        out.append({"kernel": kernel, "poses": len(tr), "vicinity_factors": len(pk), "linearize_s": round(t_lin, 4),
-                    "lm_s": round(t_lm, 3), "lm_iterations": int(opt.iterations()),
-                    "lm_s_per_iteration": round(t_lm / max(int(opt.iterations()), 1), 3),
-                    "final_error": float(g.error(res))})
-    return out
-
-
-CASES = [("default", "robust"), ("default", "paper"), ("default", "ransac"), ("default", "false30"),
+CASES = [("default", "robust"), ("default", "paper"), ("default", "false30"),
          ("corridor12", "robust"), ("corridor12", "paper"), ("tiny", "robust"), ("large", "robust"),
          ("large", "full_graph")]
 SCALING = [("large@2000", "robust"), ("large@10000", "robust")]  # + the full large case above
@@ -326,7 +278,7 @@ def main() -> None:
     if a.real:
         print(json.dumps(real_case(a.real[0], a.real[1])))
         return
-    results = {"kernels": kernel_bench(), "cases": [], "seeds": [], "holdout": [], "real": []}
+    results = {"cases": [], "seeds": [], "holdout": [], "real": []}
     runs = [(seed, mode, "seeds") for seed in SEEDS for mode in SEED_MODES]
     runs += [(seed, "robust", "holdout") for seed in HOLDOUT_SEEDS]
     for seed, mode, section in runs:
@@ -366,10 +318,7 @@ def main() -> None:
                 results["real"].append(json.loads(p.stdout.strip().splitlines()[-1]))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(results, indent=1))
-    print("| kernel | linearize s | LM s (10 it) |\n|---|---|---|")
-    for k in results["kernels"]:
-        print(f"| {k['kernel']} | {k['linearize_s']} | {k['lm_s']} |")
-    print("\n| preset | mode | poses | lm err mean/max m | heading err mean/std deg | ATE mean m | "
+    print("| preset | mode | poses | lm err mean/max m | heading err mean/std deg | ATE mean m | "
           "pair search s | solve s | total s | floor s | peak MB |\n|" + "---|" * 11)
     for c in results["cases"]:
         if "error" in c:

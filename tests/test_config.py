@@ -29,10 +29,23 @@ def test_type_and_range_errors() -> None:
     with pytest.raises(ConfigError, match="unknown key 'gap'"):
         from_dict(IngestConfig, {"gap": 1})
     assert from_dict(IngestConfig, {"max_attach_gap_s": 3}).max_attach_gap_s == 3.0
-    with pytest.raises(ConfigError, match="scale_min_span_m and solve.scale_pair_gate_m must be >= 0"):
-        from_dict(SECTIONS["optimize"], {"solve": {"scale_min_span_m": -5.0}}, "optimize")
-    with pytest.raises(ConfigError, match="scale_max_iterations must be >= scale_iterations"):
-        from_dict(SECTIONS["optimize"], {"solve": {"scale_iterations": 4, "scale_max_iterations": 3}}, "optimize")
+    with pytest.raises(ConfigError, match="need 0 < scale_min <= 1 <= scale_max"):
+        from_dict(SECTIONS["optimize"], {"odometry": {"scale_min": 1.2}}, "optimize")
+    with pytest.raises(ConfigError, match="scale_rounds_max must be >= 2"):
+        from_dict(SECTIONS["optimize"], {"odometry": {"scale_rounds_max": 1}}, "optimize")
+    with pytest.raises(ConfigError, match="unknown key 'gnc_factors'"):
+        from_dict(SECTIONS["optimize"], {"solve": {"gnc_factors": [2.0]}}, "optimize")
+
+
+def test_optimize_config_stays_small() -> None:
+    """[optimize] holds what a user may reasonably change: at most 40 settings."""
+    import dataclasses
+
+    def count(cls) -> int:
+        return sum(count(f.type if not isinstance(f.type, str) else type(getattr(cls(), f.name)))
+                   if dataclasses.is_dataclass(getattr(cls(), f.name)) else 1 for f in dataclasses.fields(cls))
+
+    assert count(SECTIONS["optimize"]) <= 40
 
 
 def test_file_layers(tmp_path: Path) -> None:

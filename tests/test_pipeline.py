@@ -142,16 +142,17 @@ def _optimize_copy(tiny_ws: Path, tmp_path: Path, capsys, grep: str):
     return run
 
 
-def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+def test_optimize_summary_names_the_fitted_scales(tiny_ws: Path, tmp_path: Path, capsys, monkeypatch) -> None:
     run = _optimize_copy(tiny_ws, tmp_path, capsys, "step-length scale")
     # the tiny venue's walks span less than the default 60 m: nothing fitted, nothing printed
     line, rep, walks, _ = run()
     assert rep["scale"]["estimated"] and rep["scale"]["fitted_walks"] == 0
     assert not walks["scale_fitted"].any() and (walks["scale"] == 1.0).all() and line == []
     # with a 10 m span some are, and the summary gives their range
-    cfg = tmp_path / "scale.toml"
-    cfg.write_text("[optimize.solve]\nscale_min_span_m = 10.0\n")
-    line, rep, walks, _ = run("--config", cfg)
+    from rmbuild.slam import scale
+
+    monkeypatch.setattr(scale, "SCALE_MIN_SPAN_M", 10.0)
+    line, rep, walks, _ = run()
     fitted = walks.loc[walks["scale_fitted"], "scale"]
     assert len(fitted) > 0 and rep["scale"]["fitted_walks"] == len(fitted)
     assert line == [f"  step-length scale fitted on {len(fitted)} walk(s): {fitted.min():.3f}-{fitted.max():.3f} "
@@ -162,7 +163,7 @@ def test_optimize_summary_names_the_anisotropic_pairs(tiny_ws: Path, tmp_path: P
     run = _optimize_copy(tiny_ws, tmp_path, capsys, "anisotropic pairs")
     # a fixed ratio: every (anti)parallel pair of the final solve is anisotropic and the summary says so
     cfg = tmp_path / "aniso.toml"
-    cfg.write_text("[optimize.vicinity]\nacross_ratio = 0.4\n")
+    cfg.write_text("[optimize.wifi]\nacross_ratio = 0.4\n")
     line, rep, _, pairs = run("--config", cfg)
     n = int(pairs["anisotropic"].sum())
     assert n > 0 and rep["vicinity"]["anisotropic_pairs"] == n
@@ -170,6 +171,6 @@ def test_optimize_summary_names_the_anisotropic_pairs(tiny_ws: Path, tmp_path: P
     assert line == [f"  anisotropic pairs: {n} of {rep['factors']['vicinity']}, sigma across/along 0.40 "
                     "(set; optimize/pairs.parquet: anisotropic)"]
     # isotropic: none, and no line
-    cfg.write_text("[optimize.vicinity]\nacross_ratio = 1.0\n")
+    cfg.write_text("[optimize.wifi]\nacross_ratio = 1.0\n")
     line, rep, _, pairs = run("--config", cfg)
     assert line == [] and not pairs["anisotropic"].any() and rep["vicinity"]["anisotropic_pairs"] == 0

@@ -8,13 +8,14 @@ import pytest
 gtsam = pytest.importorskip("gtsam")
 
 from rmbuild.config.optimize import OdometryConfig  # noqa: E402
+from rmbuild.geometry import compose as compose_se2  # noqa: E402
 from rmbuild.slam.chains import (  # noqa: E402
     add_chain_odometry,
     chain_covariances,
     fill_chains,
     keyframe_mask,
 )
-from rmbuild.slam.factors import X, add_odometry, compose_se2, poses_to_values, values_to_poses  # noqa: E402
+from rmbuild.slam.factors import X, add_odometry, poses_to_values, values_to_poses  # noqa: E402
 
 OC = OdometryConfig()
 

@@ -1,4 +1,4 @@
-"""Keys/Values round trip and the fuzzy vicinity factor (seed 001 eq. 10) in every GTSAM kernel."""
+"""Keys/Values round trip and the fuzzy vicinity factor (eq. 10) as a truncated range factor."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
-from rmbuild.config.optimize import VicinityConfig  # noqa: E402
+from rmbuild import geometry  # noqa: E402
+from rmbuild.config.optimize import WifiConfig  # noqa: E402
 from rmbuild.slam.factors import (  # noqa: E402
     X,
     fuzzy_cost,
     fuzzy_error,
     poses_to_values,
-    relative_se2,
     values_to_poses,
     vicinity_factor,
 )
@@ -28,32 +28,30 @@ def test_values_round_trip():
     assert poses_to_values(p).exists(X(199)) and not poses_to_values(p).exists(X(200))
 
 
-def test_relative_se2_matches_gtsam_between():
+def test_increments_match_gtsam_between():
     rng = np.random.default_rng(1)
     p = np.c_[rng.normal(0, 5, (20, 2)), rng.uniform(-3, 3, 20)]
-    u = relative_se2(p)
+    u = geometry.increments(p)
     for k in range(19):
         b = gtsam.Pose2(*p[k]).between(gtsam.Pose2(*p[k + 1]))
         np.testing.assert_allclose(u[k], [b.x(), b.y(), b.theta()], atol=1e-9)
 
 
 def test_fuzzy_error_is_eq10():
-    vc = VicinityConfig(d_min=2.0, d_max=30.0, e_max=1.5)
+    vc = WifiConfig(d_min=2.0, d_max=30.0, e_max=1.5)
     d = np.array([0.0, 1.99, 2.0, 16.0, 30.0, 45.0])
     np.testing.assert_allclose(fuzzy_error(d, vc), [0, 0, 0, 1.5 * 14 / 28, 1.5, 1.5])
 
 
-@pytest.mark.parametrize("kernel", ["range_tls", "range_custom", "custom_factor"])
-def test_factor_error_matches_eq10(kernel):
-    vc = VicinityConfig(d_min=2.0, d_max=30.0, e_max=1.0, omega_wifi=3.0, kernel=kernel)
-    exact_below = kernel != "range_tls"  # range_tls adds a tiny push-apart below d_min (documented)
+def test_factor_error_matches_eq10():
+    vc = WifiConfig(d_min=2.0, d_max=30.0, e_max=1.0, omega=3.0)
     for d in [0.0, 1.0, 2.0, 2.5, 10.0, 29.9, 30.0, 31.0, 100.0]:
         v = gtsam.Values()
         v.insert(X(0), gtsam.Pose2(1.0, 2.0, 0.3))
         v.insert(X(1), gtsam.Pose2(1.0 + d * np.cos(0.7), 2.0 + d * np.sin(0.7), -1.0))
         err = vicinity_factor(0, 1, vc).error(v)
         want = float(fuzzy_cost(np.array([d]), vc)[0])
-        if d >= vc.d_min or exact_below:
-            assert err == pytest.approx(want, abs=1e-9), (kernel, d)
-        else:
-            assert err <= 0.01 * 0.5 * vc.omega_wifi * vc.e_max**2 + 1e-12
+        if d >= vc.d_min:
+            assert err == pytest.approx(want, abs=1e-9), d
+        else:  # a tiny push-apart below d_min (documented)
+            assert err <= 0.01 * 0.5 * vc.omega * vc.e_max**2 + 1e-12

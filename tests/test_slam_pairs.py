@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.optimize import PairConfig
-from rmbuild.slam.pairs import RowMeta, median_window_pairs, run_matched_candidates, window_median
+from rmbuild.slam.pairs import RowMeta, SearchParams, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.rss import RssMatrix, rss_distance_reference
 from rmbuild.types import Fingerprints
 
@@ -38,9 +37,9 @@ def test_rss_distance_matches_eq9():
 
 def test_median_window_pairs_equal_brute_force():
     fp, meta = _random()
-    cfg = PairConfig(L_window_steps=6, within_min_dt_s=5.0, within_min_path_m=4.0, max_pairs_per_node=3,
+    cfg = SearchParams(window_steps=6, within_min_dt_s=5.0, within_min_path_m=4.0, max_pairs_per_node=3,
                      min_common_aps=2, block_rows=16)
-    rm = RssMatrix.from_fingerprints(fp, cfg.fill_dbm)
+    rm = RssMatrix.from_fingerprints(fp, -110.0)
     got, thr = median_window_pairs(rm, meta, cfg)
     n = len(fp)
     D = np.array([[rss_distance_reference(fp.rss_dbm[i], fp.rss_dbm[j]) for j in range(n)] for i in range(n)])
@@ -89,7 +88,7 @@ def test_run_matched_candidates_find_true_neighbours():
     walk = np.repeat([0, 1], 80)
     step = np.r_[np.arange(80), np.arange(80)]
     meta = RowMeta(np.arange(160), walk, step, step + walk * 500.0, np.r_[xa, 60 - xb])
-    cfg = PairConfig(segment_scans=2, top_k=3, run_half_scans=2, within_walk=False)
+    cfg = SearchParams(segment_scans=2, top_k=3, run_half_scans=2, within_walk=False)
     df = run_matched_candidates(RssMatrix.from_fingerprints(fp, -110.0), meta, cfg)
     x = np.r_[xa, xb]
     err = np.abs(x[df["row_k"]] - x[df["row_q"]])

@@ -13,7 +13,7 @@ from rmbuild.cli.view import rerun_option
 @click.option("--anchors", "anchors_path", type=click.Path(dir_okay=False), default=None,
               help="CSV/Parquet with walk_id, t_s, x_m, y_m: known building-frame positions (position priors).")
 @click.option("--preset", type=click.Choice(["rmbuild", "paper"]), default=None,
-              help="Start from rmbuild's defaults or from seed 001's model as published (before --config).")
+              help="Start from rmbuild's defaults or from Gu et al.'s model as published (before --config).")
 @rerun_option
 @common_options
 def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, verbose):

@@ -1,7 +1,7 @@
 """Strict loading and writing of typed, frozen, per-stage config dataclasses.
 
 Every stage's config is a frozen dataclass whose fields carry their unit in a comment. A TOML file holds
-one table per stage (``[optimize]``, ``[optimize.pairs]`` for a nested dataclass, ...). Unknown keys,
+one table per stage (``[optimize]``, ``[optimize.wifi]`` for a nested dataclass, ...). Unknown keys,
 wrong types and out-of-range values are errors, never silently dropped. The resolved config is written
 next to the stage's outputs with :func:`to_toml`.
 """

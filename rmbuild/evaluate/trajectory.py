@@ -12,36 +12,10 @@ import math
 import numpy as np
 import pandas as pd
 
+from rmbuild.geometry import align_se2, rotation_angle_rad
 
-def align_se2(
-    src_xy: np.ndarray, dst_xy: np.ndarray, weights: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares rigid 2-D transform (rotation R (2, 2), translation t (2,)) with dst ≈ R @ src + t.
-
-    ``src_xy``, ``dst_xy``: (n, 2) metres; ``weights``: (n,) non-negative or None. Umeyama without scale.
-    With a single point (or all weight on one point) the rotation is the identity.
-    """
-    src = np.asarray(src_xy, dtype=float).reshape(-1, 2)
-    dst = np.asarray(dst_xy, dtype=float).reshape(-1, 2)
-    if len(src) != len(dst) or len(src) == 0:
-        raise ValueError("align_se2 needs two non-empty point sets of the same length")
-    w = np.ones(len(src)) if weights is None else np.asarray(weights, dtype=float)
-    if w.sum() <= 0:
-        raise ValueError("align_se2 needs positive total weight")
-    w = w / w.sum()
-    mu_s = w @ src
-    mu_d = w @ dst
-    cov = ((dst - mu_d) * w[:, None]).T @ (src - mu_s)
-    u, _, vt = np.linalg.svd(cov)
-    d = np.sign(np.linalg.det(u @ vt)) or 1.0
-    r = u @ np.diag([1.0, d]) @ vt
-    t = mu_d - r @ mu_s
-    return r, t
-
-
-def rotation_angle_rad(r: np.ndarray) -> float:
-    """The angle (rad, in (-pi, pi]) of a 2-D rotation matrix."""
-    return float(math.atan2(r[1, 0], r[0, 0]))
+__all__ = ["align_se2", "ate", "heading_alignment_error_deg", "interpolate_xy", "landmark_error",
+           "rotation_angle_rad", "trajectory_metrics"]
 
 
 def _stats(err: np.ndarray) -> dict[str, float]:

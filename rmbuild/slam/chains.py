@@ -17,8 +17,9 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
+from rmbuild import geometry
 from rmbuild.config.optimize import OdometryConfig
-from rmbuild.slam.factors import X, between_se2, compose_many
+from rmbuild.slam.factors import X
 
 
 def keyframe_mask(n: int, starts: np.ndarray, ends: np.ndarray, required: np.ndarray, max_gap: int) -> np.ndarray:
@@ -63,7 +64,7 @@ def chain_covariances(raw: np.ndarray, a: np.ndarray, b: np.ndarray, ocfg: Odome
     for j in range(1, int(length.max(initial=0)) + 1):
         m = length >= j
         k = a[m] + j  # the increment from node k-1 to node k
-        u = between_se2(raw[k - 1], raw[k])
+        u = geometry.between(raw[k - 1], raw[k])
         # Ad(u⁻¹): u⁻¹ = (R(-θ), -R(-θ) t); Ad(x, y, θ) = [[c, -s, y], [s, c, -x], [0, 0, 1]]
         c, s = np.cos(u[:, 2]), np.sin(u[:, 2])
         xi, yi = -(c * u[:, 0] + s * u[:, 1]), s * u[:, 0] - c * u[:, 1]
@@ -82,7 +83,7 @@ def add_chain_odometry(graph: gtsam.NonlinearFactorGraph, raw: np.ndarray, start
     a, b = _segments(starts, ends, kf)
     if not len(a):
         return 0
-    u = between_se2(raw[a], raw[b])
+    u = geometry.between(raw[a], raw[b])
     cov = chain_covariances(raw, a, b, ocfg)
     single = gtsam.noiseModel.Diagonal.Sigmas(np.array([ocfg.sigma_x_m, ocfg.sigma_y_m, 1 / np.sqrt(ocfg.mu)]))
     for i in range(len(a)):
@@ -111,10 +112,10 @@ def fill_chains(xyt: np.ndarray, raw: np.ndarray, starts: np.ndarray, ends: np.n
         if not inner.any():
             continue
         i, a, b = nodes[inner], a[inner], b[inner]
-        fwd = compose_many(out[a], between_se2(raw[a], raw[i]))
-        bwd = compose_many(out[b], between_se2(raw[b], raw[i]))
+        fwd = geometry.compose(out[a], geometry.between(raw[a], raw[i]))
+        bwd = geometry.compose(out[b], geometry.between(raw[b], raw[i]))
         w = (i - a) / (b - a)
         out[i, :2] = (1 - w)[:, None] * fwd[:, :2] + w[:, None] * bwd[:, :2]
-        dth = np.angle(np.exp(1j * (bwd[:, 2] - fwd[:, 2])))
-        out[i, 2] = np.angle(np.exp(1j * (fwd[:, 2] + w * dth)))
+        dth = geometry.wrap(bwd[:, 2] - fwd[:, 2])
+        out[i, 2] = geometry.wrap(fwd[:, 2] + w * dth)
     return out

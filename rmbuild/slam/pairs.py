@@ -21,10 +21,29 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.optimize import PairConfig
 from rmbuild.slam.rss import RssMatrix
 
 Progress = Callable[[str, dict], None] | None
+
+
+@dataclass(frozen=True)
+class SearchParams:
+    """What the searches need: the eq. 9 window (steps), shared APs per pair, the per-scan cap of the
+    median-window rule, the run-matched search's segment length, top-k, mutual rule and run half-length,
+    whether same-walk pairs are searched and how far apart in time (s) and walked path (m) they must be,
+    and the block size (rows) of the blocked matrix products."""
+
+    window_steps: int = 20
+    min_common_aps: int = 3
+    max_pairs_per_node: int = 10
+    segment_scans: int = 2
+    top_k: int = 8
+    mutual: bool = True
+    run_half_scans: int = 2
+    within_walk: bool = True
+    within_min_dt_s: float = 30.0
+    within_min_path_m: float = 15.0
+    block_rows: int = 2048
 
 
 @dataclass
@@ -38,7 +57,7 @@ class RowMeta:
     path_m: np.ndarray
 
 
-def _allowed(meta: RowMeta, rows: np.ndarray, cols: np.ndarray | slice, pcfg: PairConfig, within: bool):
+def _allowed(meta: RowMeta, rows: np.ndarray, cols: np.ndarray | slice, pcfg: SearchParams, within: bool):
     """bool (len(rows), n_cols): pair may be searched (different walk, or same walk far in time and path)."""
     cw = meta.walk[cols]
     same = meta.walk[rows][:, None] == cw[None, :]
@@ -99,7 +118,7 @@ def _dedupe(ri: np.ndarray, rj: np.ndarray, *cols: np.ndarray):
 
 
 def median_window_pairs(
-    rm: RssMatrix, meta: RowMeta, pcfg: PairConfig, progress: Progress = None
+    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None
 ) -> tuple[pd.DataFrame, np.ndarray]:
     """Seed 001's pair rule over all row pairs; returns (pairs, d_med per row).
 
@@ -108,7 +127,7 @@ def median_window_pairs(
     union over both directions is returned once per unordered pair.
     """
     n = len(rm)
-    thr = window_median(rm, meta, pcfg.L_window_steps)
+    thr = window_median(rm, meta, pcfg.window_steps)
     thr_f = np.where(np.isnan(thr), -np.inf, thr)
     out_r, out_c, out_d = [], [], []
     bs = pcfg.block_rows
@@ -147,7 +166,7 @@ def _segments(meta: RowMeta, seg: int) -> np.ndarray:
 
 
 def run_matched_candidates(
-    rm: RssMatrix, meta: RowMeta, pcfg: PairConfig, progress: Progress = None
+    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None
 ) -> pd.DataFrame:
     """rmbuild's candidate pairs: segment top-k (mutual) then the best run-matched node pair per segment pair."""
     n = len(rm)
@@ -164,9 +183,6 @@ def run_matched_candidates(
     first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
     smeta = RowMeta(meta.node[first], meta.walk[first], meta.step[first],
                     np.bincount(seg, meta.t_s, n_seg) / cnt, np.bincount(seg, meta.path_m, n_seg) / cnt)
-    if pcfg.per_walk:
-        si, sj = _per_walk_segment_pairs(srm, smeta, pcfg, progress)
-        return _best_run_pairs(rm, meta, seg, first, cnt.astype(np.int64), si, sj, pcfg)
     k = min(pcfg.top_k, max(n_seg - 1, 1))
     nb = np.full((n_seg, k), -1, np.int64)
     nbd = np.full((n_seg, k), np.inf, np.float32)
@@ -199,55 +215,7 @@ def run_matched_candidates(
     return _best_run_pairs(rm, meta, seg, first, cnt.astype(np.int64), si, sj, pcfg)
 
 
-def _per_walk_segment_pairs(srm: RssMatrix, smeta: RowMeta, pcfg: PairConfig, progress: Progress = None):
-    """Segment pairs (si, sj): for each segment, its best-matching segment in every other walk (and in its
-    own walk far in time/path when ``within_walk``), then the ``top_k`` walks whose best match is closest;
-    with ``mutual``, a pair is kept only if each is the other's best in the other's walk."""
-    n_seg = len(srm)
-    order = np.argsort(smeta.walk, kind="stable")
-    ws = smeta.walk[order]
-    bnd = np.r_[0, np.flatnonzero(np.diff(ws)) + 1]
-    n_w = len(bnd)
-    cw_sorted = np.repeat(np.arange(n_w), np.diff(np.r_[bnd, n_seg]))
-    walk_c = np.empty(n_seg, np.int64)
-    walk_c[order] = cw_sorted  # compact walk index of each segment
-    k = max(1, min(pcfg.top_k, n_w))
-    best = np.full((n_seg, n_w), -1, np.int64) if pcfg.mutual else None
-    out_i, out_j = [], []
-    bs = max(16, pcfg.block_rows // 2)
-    pos = np.arange(n_seg)
-    for s in range(0, n_seg, bs):
-        rows = np.arange(s, min(n_seg, s + bs))
-        d, common = srm.block(rows, order)
-        bad = ~_allowed(smeta, rows, order, pcfg, within=pcfg.within_walk)
-        bad |= common < pcfg.min_common_aps
-        d[bad] = np.inf
-        mins = np.minimum.reduceat(d, bnd, axis=1)
-        first_col = np.minimum.reduceat(np.where((d == mins[:, cw_sorted]) & np.isfinite(d), pos[None, :], n_seg),
-                                        bnd, axis=1)
-        arg = np.where(first_col < n_seg, order[np.minimum(first_col, n_seg - 1)], -1)
-        if best is not None:
-            best[rows] = arg
-        kk = min(k, n_w)
-        top = np.argpartition(mins, kk - 1, axis=1)[:, :kk] if n_w > kk else np.tile(np.arange(n_w), (len(rows), 1))
-        tj = np.take_along_axis(arg, top, axis=1)
-        ok = np.isfinite(np.take_along_axis(mins, top, axis=1)) & (tj >= 0)
-        out_i.append(np.repeat(rows, kk)[ok.ravel()])
-        out_j.append(tj.ravel()[ok.ravel()])
-        if progress:
-            progress("pair_search", {"done": int(rows[-1] + 1), "total": n_seg, "phase": "segments"})
-    si = np.concatenate(out_i) if out_i else np.zeros(0, np.int64)
-    sj = np.concatenate(out_j) if out_j else np.zeros(0, np.int64)
-    if best is not None and len(si):
-        si_, sj_ = si, sj
-        keep = best[sj_, walk_c[si_]] == si_
-        si, sj = si[keep], sj[keep]
-    si, sj = np.minimum(si, sj), np.maximum(si, sj)
-    _, u = np.unique(si.astype(np.int64) * n_seg + sj, return_index=True)
-    return si[u], sj[u]
-
-
-def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: PairConfig) -> pd.DataFrame:
+def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: SearchParams) -> pd.DataFrame:
     """For each segment pair, the node pair (i in si, j in sj) with the smallest mean RSS distance over a
     run of 2r+1 consecutive rows of each walk, walked in the same (+1) or opposite (-1) direction."""
     n = len(rm)

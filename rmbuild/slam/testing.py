@@ -14,6 +14,29 @@ import pandas as pd
 from rmbuild.types import Dataset, Fingerprints
 
 
+def walk_set(raw: np.ndarray, walk_of: np.ndarray, yaw_abs: np.ndarray | None = None, yaw_sigma: float = 0.1):
+    """A :class:`rmbuild.slam.problem.WalkSet` from own-frame poses ``raw`` (n, 3) and the walk of each node
+    (contiguous, 0..n_walks-1), one step per second, no fingerprints: for tests of the back end's parts."""
+    from rmbuild.slam.problem import WalkSet
+
+    raw = np.asarray(raw, float)
+    walk_of = np.asarray(walk_of, np.int64)
+    n_walks = int(walk_of.max()) + 1
+    starts = np.searchsorted(walk_of, np.arange(n_walks))
+    ends = np.searchsorted(walk_of, np.arange(n_walks), side="right")
+    step_len = np.r_[0.0, np.hypot(*np.diff(raw[:, :2], axis=0).T)]
+    step_len[starts] = 0.0
+    path = np.cumsum(step_len)
+    path -= np.repeat(path[starts], ends - starts)
+    n = len(raw)
+    yaw = np.full(n, np.nan) if yaw_abs is None else np.asarray(yaw_abs, float)
+    fp = Fingerprints(np.zeros(0, np.int64), np.zeros(0, dtype=object), np.zeros((0, 0), np.float32),
+                      np.zeros((0, 0), np.int32))
+    return WalkSet([f"w{w}" for w in range(n_walks)], raw, walk_of, starts, ends, path,
+                   np.arange(n, dtype=float), np.arange(n) - np.repeat(starts, ends - starts),
+                   np.ones(n_walks, bool), yaw, np.full(n, yaw_sigma), fp)
+
+
 def _route(rng, xs, ys, n_steps, step_m):
     """True positions (n_steps, 2) of a walk along the corridor grid (lines x in xs, y in ys)."""
     ix, iy = rng.integers(len(xs)), rng.integers(len(ys))
@@ -131,3 +154,25 @@ def make_venue(
         truth_poses=pd.concat(truth, ignore_index=True),
     )
     return ds, Fingerprints.from_readings(wifi_df)
+
+
+def false_pairs(frac: float, seed: int = 0):
+    """A ``candidates_hook`` for :func:`rmbuild.slam.optimize` that replaces a fraction ``frac`` of the Wi-Fi
+    candidate pairs by random cross-walk pairs of scanned nodes (marked ``injected``): the robustness test."""
+
+    def hook(cand: pd.DataFrame, walks) -> pd.DataFrame:
+        rng = np.random.default_rng(seed + 7919)
+        n_bad = int(round(frac * len(cand)))
+        if n_bad == 0:
+            return cand
+        drop = rng.choice(len(cand), n_bad, replace=False)
+        keep = cand.drop(index=cand.index[drop]).copy()
+        nodes = walks.fingerprints.node
+        a, b = rng.choice(nodes, 4 * n_bad), rng.choice(nodes, 4 * n_bad)
+        ok = walks.walk_of[a] != walks.walk_of[b]
+        a, b = a[ok][:n_bad], b[ok][:n_bad]
+        fake = pd.DataFrame({"node_k": np.minimum(a, b), "node_q": np.maximum(a, b), "rss_dist": np.nan,
+                             "common": 0, "kind": "cross", "injected": True})
+        return pd.concat([keep, fake], ignore_index=True)
+
+    return hook

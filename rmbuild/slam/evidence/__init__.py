@@ -1,0 +1,24 @@
+"""Evidence sources of the back end, one module each, behind one interface (:mod:`.base`)."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.slam.evidence.anchors import AnchorSource
+from rmbuild.slam.evidence.base import EvidenceSource
+from rmbuild.slam.evidence.compass import CompassSource
+from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
+from rmbuild.slam.problem import WalkSet
+
+__all__ = ["AnchorSource", "CompassSource", "EvidenceSource", "WifiSource", "default_sources"]
+
+
+def default_sources(walks: WalkSet, cfg: OptimizeConfig, anchors: pd.DataFrame | None = None, progress=None,
+                    candidates_hook: CandidatesHook | None = None) -> list[EvidenceSource]:
+    """The sources every run uses, in the order their links and static factors are gathered."""
+    return [
+        WifiSource(walks, cfg.wifi, progress, candidates_hook),
+        AnchorSource(walks, anchors, cfg.anchors),
+        CompassSource(walks, cfg.compass),
+    ]

@@ -1,0 +1,94 @@
+"""What placement produces and works on: a walk fit, the growing state, the final placement."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class WalkFit:
+    """A rigid fit of one walk (or a rigid group of walks) to the placed map."""
+
+    t: np.ndarray  # (3,) world_T_walk
+    score: int  # distinct inlier scans of the walk
+    second: int  # the same for the best hypothesis elsewhere (pairs), or the outlier scans (kNN)
+    shared_m: float  # walked path (m) the inliers cover
+    partners: int  # placed walks among the inliers
+    method: str  # "translation" (compass rotation), "se2" (fitted rotation), "pair" (a walk-pair edge)
+    inliers: np.ndarray  # bool over the correspondences fitted
+
+
+@dataclass
+class GrowState:
+    """The placement while it grows: per walk its frame, component (-1 = not yet placed), the round it was
+    placed in, its inlier count and shared path at placement, how it was placed, and whether its compass
+    rotation is trusted."""
+
+    T: np.ndarray
+    comp: np.ndarray
+    rnd: np.ndarray
+    n_inl: np.ndarray
+    shared: np.ndarray
+    method: np.ndarray
+    heading_used: np.ndarray
+    reference: int
+
+    @staticmethod
+    def empty(n_walks: int, reference: int, heading_known: np.ndarray) -> GrowState:
+        return GrowState(np.zeros((n_walks, 3)), np.full(n_walks, -1), np.full(n_walks, -1),
+                         np.zeros(n_walks, np.int64), np.zeros(n_walks), np.full(n_walks, "", dtype=object),
+                         heading_known.copy(), reference)
+
+    def place(self, w: int, f: WalkFit, c_id: int, rnd: int) -> None:
+        self.T[w] = f.t
+        self.comp[w], self.rnd[w], self.n_inl[w] = c_id, rnd, f.score
+        self.shared[w], self.method[w] = f.shared_m, f.method
+
+    def seed(self, w: int, c_id: int) -> None:
+        self.comp[w], self.rnd[w], self.method[w], self.T[w] = c_id, 0, "seed", (0.0, 0.0, 0.0)
+
+    def copy(self) -> GrowState:
+        return GrowState(self.T.copy(), self.comp.copy(), self.rnd.copy(), self.n_inl.copy(), self.shared.copy(),
+                         self.method.copy(), self.heading_used.copy(), self.reference)
+
+
+@dataclass
+class Placement:
+    """Every walk's initial frame in the common frame and how it got it.
+
+    ``world_T_walk`` (n_walks, 3); ``component`` (n_walks,) 0 = the reference walk's (linked) component;
+    ``heading_known`` walks whose compass rotation is trusted; ``method`` how each walk was placed
+    ("seed", "translation", "se2", "pair", "merge", ""); ``links`` (node_k, node_q) scan links the kNN
+    rounds placed walks with, or None; ``gate_m`` the distance (m) within which a correspondence is
+    consistent with this placement, None when the placement verified nothing (every walk at the origin).
+    Anchors set ``frame_rotation`` (rad, applied to the reference frame), ``gauge_full`` /
+    ``gauge_rotation_only`` (component roots that need a full / rotation-only gauge prior) and
+    ``anchored``; without anchors each component's root gets a full gauge prior.
+    ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics).
+    """
+
+    world_T_walk: np.ndarray
+    component: np.ndarray
+    reference: int
+    heading_known: np.ndarray
+    method: np.ndarray
+    links: tuple[np.ndarray, np.ndarray] | None = None
+    gate_m: float | None = None
+    frame_rotation: float = 0.0
+    gauge_full: list[int] = field(default_factory=list)
+    gauge_rotation_only: list[int] = field(default_factory=list)
+    anchored: np.ndarray | None = None
+    n_anchors: int = 0
+    edge_fits: tuple[int, int] = (0, 0)
+    log: list[dict] = field(default_factory=list)
+
+    @property
+    def linked(self) -> np.ndarray:
+        return self.component == 0
+
+    def roots(self) -> list[int]:
+        """The reference walk and the first walk of every other component."""
+        n_comp = int(self.component.max()) + 1 if len(self.component) else 0
+        return [self.reference] + [int(np.flatnonzero(self.component == c)[0]) for c in range(1, n_comp)]

@@ -1,0 +1,116 @@
+"""Walk-level refinement: the placed walks as rigid bodies, moved jointly to agree with their links.
+
+A robust Gauss-Newton over the frames (x, y, theta) of the placed walks: each link (k, q) between two
+placed walks contributes the 2-D difference of its nodes' world positions (sigma PAIR_SIGMA_M), each walk
+with a trusted compass a rotation prior; both with a Cauchy weight (scale ROBUST_C sigmas), which is
+iteratively reweighted least squares — the walk frames are few, so a dense-enough sparse solve per
+iteration is cheap and needs no factor graph.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
+
+from rmbuild import geometry
+from rmbuild.slam.problem import WalkSet
+
+# m; 1-sigma of a link's position difference (Wi-Fi's resolution)
+PAIR_SIGMA_M = 3.0
+# Cauchy scale (sigmas) of links and rotation priors
+ROBUST_C = 2.0
+# Gauss-Newton iterations per refinement
+ITERATIONS = 8
+# links within GATE_FACTOR x the placement gate of each other are used
+GATE_FACTOR = 1.5
+# m of walked length; a shorter walk keeps its compass rotation (its prior's sigma times
+# SHORT_WALK_ROT_SIGMA_SCALE): over a few metres of lever arm, links metres apart turn it further from the
+# truth than the compass (docs/optimize.md: ILC F1 rotation error 11.2 -> 7.9 deg)
+SHORT_WALK_M = 40.0
+SHORT_WALK_ROT_SIGMA_SCALE = 0.1
+
+
+def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
+                 rot_prior: np.ndarray, rot_sig: np.ndarray, iterations: int = ITERATIONS) -> np.ndarray:
+    """Robust Gauss-Newton over rigid walk frames T (n_walks, 3) of the ``active`` walks (module docstring).
+
+    ``rot_prior`` (n_walks,) rad, NaN where none; the reference walk's position is fixed, its rotation too
+    unless it has a rotation prior. Returns new T.
+    """
+    T = T.copy()
+    act = np.flatnonzero(active)
+    if len(act) < 2 and not np.isfinite(rot_prior[ref]):
+        return T
+    col = np.full(len(T), -1)
+    col[act] = np.arange(len(act))
+    nv = 3 * len(act)
+    walk_of = walks.walk_of
+    wa, wb = walk_of[nk], walk_of[nq]
+    keep = active[wa] & active[wb] & (wa != wb)
+    nk, nq, wa, wb = nk[keep], nq[keep], wa[keep], wb[keep]
+    pw = np.flatnonzero(active & np.isfinite(rot_prior))
+    for _ in range(iterations):
+        J, res, w = _linearise(T, nk, nq, wa, wb, col, nv, walks)
+        e = geometry.wrap(T[pw, 2] - rot_prior[pw]) / rot_sig[pw]
+        Jp = sp.coo_matrix((1.0 / rot_sig[pw], (np.arange(len(pw)), 3 * col[pw] + 2)), shape=(len(pw), nv))
+        J = sp.vstack([J, Jp]).tocsr()
+        res = np.r_[res, e]
+        w = np.r_[w, 1.0 / (1.0 + (np.abs(e) / ROBUST_C) ** 2)]
+        A = (J.T @ sp.diags(w) @ J).tolil()
+        g = J.T @ (w * res)
+        # gauge: reference position (and rotation without a prior); tiny damping for unconnected walks
+        k = 3 * col[ref]
+        A[k, k] += 1e9
+        A[k + 1, k + 1] += 1e9
+        if not np.isfinite(rot_prior[ref]):
+            A[k + 2, k + 2] += 1e9
+        dx = spsolve((A.tocsr() + sp.identity(nv) * 1e-6).tocsc(), -g)
+        if not np.all(np.isfinite(dx)):
+            break
+        T[act, 0] += dx[0::3]
+        T[act, 1] += dx[1::3]
+        T[act, 2] = geometry.wrap(T[act, 2] + dx[2::3])
+        if np.max(np.abs(dx)) < 1e-4:
+            break
+    return T
+
+
+def _linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
+    """(J, whitened residuals, Cauchy weights) of the links' position differences."""
+    pa = walks.world_xy(T, nk)
+    pb = walks.world_xy(T, nq)
+    r = (pa - pb) / PAIR_SIGMA_M
+    wr = 1.0 / (1.0 + (np.hypot(r[:, 0], r[:, 1]) / ROBUST_C) ** 2)
+    # d(R x + t)/d theta = perp(R x) with perp(v) = (-v_y, v_x); relative to the rotated part only
+    ra = pa - T[wa, :2]
+    rb = pb - T[wb, :2]
+    m = len(nk)
+    i, j = np.arange(m), np.arange(m) + m
+    rows = np.r_[i, i, i, j, j, j, i, i, j, j]
+    cols = np.r_[3 * col[wa], 3 * col[wb], 3 * col[wa] + 2, 3 * col[wa] + 1, 3 * col[wb] + 1,
+                 3 * col[wa] + 2, 3 * col[wb] + 2, 3 * col[wb] + 2, 3 * col[wb] + 2, 3 * col[wb] + 2]
+    # x rows: +t_ax, -t_bx, +(-ra_y) th_a, -(-rb_y) th_b ; y rows: +t_ay, -t_by, +ra_x th_a, -rb_x th_b
+    vals = np.r_[np.ones(m), -np.ones(m), -ra[:, 1], np.ones(m), -np.ones(m), ra[:, 0], rb[:, 1],
+                 np.zeros(m), -rb[:, 0], np.zeros(m)] / PAIR_SIGMA_M
+    J = sp.coo_matrix((vals, (rows, cols)), shape=(2 * m, nv)).tocsr()
+    return J, np.r_[r[:, 0], r[:, 1]], np.r_[wr, wr]
+
+
+def refine_placed(T: np.ndarray, placed: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
+                  prior: np.ndarray, heading_used: np.ndarray, rot_sig: np.ndarray, gate_m: float,
+                  walk_len: np.ndarray) -> np.ndarray:
+    """Refine the placed walks on the links currently within GATE_FACTOR x ``gate_m`` (twice, re-gating).
+
+    Walks shorter than SHORT_WALK_M keep their compass rotation (a tighter prior); ``prior`` is used only
+    where ``heading_used``.
+    """
+    wk, wq = walks.walk_of[nk], walks.walk_of[nq]
+    both = placed[wk] & placed[wq]
+    pr = np.where(heading_used, prior, np.nan)
+    rot_sig = np.where(walk_len < SHORT_WALK_M, rot_sig * SHORT_WALK_ROT_SIGMA_SCALE, rot_sig)
+    for _ in range(2):
+        d = np.linalg.norm(walks.world_xy(T, nk[both]) - walks.world_xy(T, nq[both]), axis=1)
+        sel = np.flatnonzero(both)[d < gate_m * GATE_FACTOR]
+        T = refine_walks(T, placed, nk[sel], nq[sel], walks, ref, pr, rot_sig)
+    return T

@@ -1,0 +1,78 @@
+"""The tables and figures :func:`rmbuild.slam.optimize` reports: per walk, and for the whole run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.slam.checks import CheckResult
+from rmbuild.slam.placement import Placement
+from rmbuild.slam.placement.edges import PAIR_MIN_SHARED_M
+from rmbuild.slam.problem import WalkSet, covered_m
+from rmbuild.slam.solve import SolveOutcome
+
+
+def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks: CheckResult,
+               outcome: SolveOutcome) -> pd.DataFrame:
+    """Per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, n_partner_walks,
+    shared_path_m, world_T_walk_x_m / _y_m / _theta_rad, heading_known, extent_ratio, confidence (0-1),
+    placement, anchored, scale, scale_fitted."""
+    n_walks = walks.n_walks
+    n_cross, n_in, shared, partners = _cross_pair_counts(walks, pairs)
+    linked = placement.linked & walks.keep
+    frac_in = np.where(n_cross > 0, n_in / np.maximum(n_cross, 1), 0.0)
+    conf = np.where(linked, np.clip(shared / (4 * PAIR_MIN_SHARED_M), 0, 1) * frac_in, 0.0)
+    conf[placement.reference] = 1.0 if walks.keep[placement.reference] else 0.0
+    T = placement.world_T_walk
+    anchored = placement.anchored if placement.anchored is not None else np.zeros(n_walks, bool)
+    return pd.DataFrame({
+        "walk_id": walks.walk_ids, "n_poses": walks.ends - walks.starts, "linked": linked,
+        "component": placement.component.astype(np.int64), "reference": np.arange(n_walks) == placement.reference,
+        "n_cross_pairs": n_cross, "n_partner_walks": partners, "shared_path_m": shared,
+        "world_T_walk_x_m": T[:, 0], "world_T_walk_y_m": T[:, 1], "world_T_walk_theta_rad": T[:, 2],
+        "heading_known": placement.heading_known, "extent_ratio": checks.extent_ratio, "confidence": conf,
+        "placement": placement_labels(placement, linked, anchored), "anchored": anchored,
+        "scale": outcome.scale, "scale_fitted": outcome.scale_fitted,
+    })
+
+
+def _cross_pair_counts(walks: WalkSet, pairs: pd.DataFrame):
+    """Per walk: cross pairs, of them in range at the end, shared path (m) they cover, partner walks."""
+    n_walks = walks.n_walks
+    cr = pairs[pairs["kind"] == "cross"]
+    nk, nq = cr["node_k"].to_numpy(), cr["node_q"].to_numpy()
+    wk, wq = walks.walk_of[nk], walks.walk_of[nq]
+    inr = cr["in_range"].to_numpy().astype(np.int64)
+    n_cross = np.bincount(wk, minlength=n_walks) + np.bincount(wq, minlength=n_walks)
+    n_in = np.bincount(wk, weights=inr, minlength=n_walks) + np.bincount(wq, weights=inr, minlength=n_walks)
+    partners = [len(set(wq[wk == w].tolist()) | set(wk[wq == w].tolist())) for w in range(n_walks)]
+    shared = np.zeros(n_walks)
+    for w in range(n_walks):
+        nodes = np.r_[nk[wk == w], nq[wq == w]]
+        shared[w] = covered_m(walks.path[nodes]) if len(nodes) else 0.0
+    return n_cross.astype(np.int64), n_in.astype(np.int64), shared, partners
+
+
+def placement_labels(placement: Placement, linked: np.ndarray, anchored: np.ndarray) -> np.ndarray:
+    """How each walk got its initial frame: "reference", "translation" / "se2" (walk-to-map fit with the
+    compass rotation / with a fitted one), "pair" (a walk-pair edge), "merge" (its component was fitted to
+    the map as one body), "anchor" (not linked, placed by anchors), "" (neither, or every walk at the origin)."""
+    out = np.array(placement.method, dtype=object, copy=True)
+    out[placement.reference] = "reference"
+    out[~linked] = ""
+    out[~linked & anchored] = "anchor"
+    return out
+
+
+def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str | None:
+    """One line naming the walks not linked to the reference walk (None when every kept walk is)."""
+    linked, anchored = table["linked"].to_numpy(), table["anchored"].to_numpy()
+    unlinked = np.flatnonzero(walks.keep & ~linked & ~anchored)
+    if not len(unlinked):
+        return None
+    by_anchor = int((anchored & ~linked).sum())
+    names = ", ".join(walks.walk_ids[w] for w in unlinked[:5]) + (", ..." if len(unlinked) > 5 else "")
+    also = f"; {by_anchor} more placed by anchors alone" if by_anchor else ""
+    return (f"{len(unlinked)} of {int(walks.keep.sum())} walk(s) not linked to the reference walk "
+            f"{walks.walk_ids[reference]} ({names}): their placement is not constrained by Wi-Fi{also} "
+            "(optimize/walks.parquet: linked, anchored, component)")

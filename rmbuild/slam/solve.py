@@ -1,0 +1,202 @@
+"""The joint solve: the pose graph assembled from odometry, the gauge and the sources, solved by
+Levenberg-Marquardt (gtsam) as often as :class:`rmbuild.slam.schedule.SolveSchedule` says.
+
+The graph has one node per keyframe (:mod:`rmbuild.slam.chains`): every node some factor other than
+odometry touches, each walk's ends, and one every KEYFRAME_MAX_GAP steps; the steps between are put back
+after each solve. Odometry is rebuilt from each walk's scaled dead reckoning whenever a scale round moves
+a step-length scale (:mod:`rmbuild.slam.scale`), and the solve after it starts from the poses stretched
+about each walk's centroid.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.slam import schedule
+from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
+from rmbuild.slam.evidence.base import EvidenceSource, SolveState
+from rmbuild.slam.factors import poses_to_values, values_to_poses
+from rmbuild.slam.scale import scaled_raw, update_scales
+from rmbuild.slam.schedule import SolveSchedule
+
+log = logging.getLogger(__name__)
+Progress = Callable[[str, dict], None] | None
+
+# steps; the chain reduction keeps at least one node every this many steps (long chains linearise badly)
+KEYFRAME_MAX_GAP = 20
+# poses; below this COLAMD orders the elimination (METIS pays off on big graphs, ~3x at 50k poses); gtsam
+# 4.3's METIS also corrupts memory on graphs with isolated variables (a pinned one-pose walk)
+METIS_MIN_POSES = 5000
+# Levenberg-Marquardt stops and damping (gtsam's LevenbergMarquardtParams; Nielsen's lambda update)
+LM_RELATIVE_TOL = 1e-3
+LM_ABSOLUTE_TOL = 1e-6
+LM_LAMBDA_INITIAL = 1e-5
+LM_LAMBDA_FACTOR = 10.0
+
+
+@dataclass
+class SolveOutcome:
+    """The solved poses (n, 3), the scaled dead reckoning they were solved against, per-walk scales and
+    which walks were fitted, solver counts and the cost history (initial cost, then one per iteration)."""
+
+    poses: np.ndarray
+    raw_scaled: np.ndarray
+    scale: np.ndarray
+    scale_fitted: np.ndarray
+    settling_used: np.ndarray
+    keyframes: np.ndarray
+    iterations: int = 0
+    solves: int = 0
+    scale_rounds: int = 0
+    n_odometry: int = 0
+    cost_history: list[float] = field(default_factory=list)
+    final_cost: float = 0.0
+    initial_cost: float = 0.0
+    first_solve_initial_cost: float | None = None
+    ordering: str = "METIS"
+
+
+class _Graph:
+    """Odometry over the keyframes, from the current scaled dead reckoning, plus the static factors."""
+
+    def __init__(self, walks, kf: np.ndarray, static: list, cfg: OptimizeConfig):
+        self.walks, self.kf, self.cfg = walks, kf, cfg
+        self.kf_idx = np.flatnonzero(kf)
+        self.static = gtsam.NonlinearFactorGraph()
+        for f in static:
+            self.static.add(f)
+        self.set_scale(walks.raw)
+
+    def set_scale(self, raw_s: np.ndarray) -> None:
+        w = self.walks
+        self.raw_s = raw_s
+        self.odo = gtsam.NonlinearFactorGraph()
+        self.n_odo = add_chain_odometry(self.odo, raw_s, w.starts[w.keep], w.ends[w.keep], self.kf, self.cfg.odometry)
+
+    def build(self, factors: list) -> gtsam.NonlinearFactorGraph:
+        g = gtsam.NonlinearFactorGraph(self.odo)
+        g.push_back(self.static)
+        for f in factors:
+            g.add(f)
+        return g
+
+    def to_values(self, xyt: np.ndarray) -> gtsam.Values:
+        return poses_to_values(xyt[self.kf_idx], nodes=self.kf_idx)
+
+    def from_values(self, v: gtsam.Values) -> np.ndarray:
+        w = self.walks
+        full = np.zeros((w.n, 3))
+        full[self.kf_idx] = values_to_poses(v, nodes=self.kf_idx)
+        return fill_chains(full, self.raw_s, w.starts[w.keep], w.ends[w.keep], self.kf)
+
+
+def keyframes(walks, required: np.ndarray, chain_reduction: bool) -> np.ndarray:
+    """bool (n,): the nodes the solve keeps."""
+    if not chain_reduction:
+        return np.ones(walks.n, bool)
+    return keyframe_mask(walks.n, walks.starts[walks.keep], walks.ends[walks.keep], required, KEYFRAME_MAX_GAP)
+
+
+def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progress: Progress, outer: int,
+                        ordering: str):
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(cfg.solve.max_iterations)
+    params.setRelativeErrorTol(LM_RELATIVE_TOL)
+    params.setAbsoluteErrorTol(LM_ABSOLUTE_TOL)
+    params.setOrderingType(ordering)
+    params.setlambdaInitial(LM_LAMBDA_INITIAL)
+    params.setlambdaFactor(LM_LAMBDA_FACTOR)
+    params.setUseFixedLambdaFactor(False)  # Nielsen's update, not gtsam's default fixed factor
+    params.setDiagonalDamping(False)
+
+    def hook(it, before, after):
+        history.append(float(after))
+        if progress:
+            progress("solve", {"outer": outer, "iteration": int(it), "cost_before": float(before),
+                               "cost_after": float(after), "max_iterations": cfg.solve.max_iterations})
+
+    params.iterationHook = hook
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    result = opt.optimize()
+    return result, int(opt.iterations())
+
+
+def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], static: list,
+        required: np.ndarray, cfg: OptimizeConfig, progress: Progress = None) -> SolveOutcome:
+    """Solve the pose graph from ``init_xyt`` as the schedule says (module docstring)."""
+    req = np.zeros(walks.n, bool)
+    req[required] = True
+    kf = keyframes(walks, req, cfg.solve.chain_reduction)
+    graph = _Graph(walks, kf, static, cfg)
+    ocfg = cfg.odometry
+    sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, ocfg.scale_rounds_max)
+    ordering = "COLAMD" if (~walks.keep).any() or len(graph.kf_idx) < METIS_MIN_POSES else "METIS"
+    scale = np.ones(walks.n_walks)
+    out = SolveOutcome(init_xyt, walks.raw, scale, np.zeros(walks.n_walks, bool), np.zeros(walks.n_walks, bool),
+                       graph.kf_idx, ordering=ordering)
+    settling = np.zeros(walks.n_walks, bool)
+    values = graph.to_values(init_xyt)
+    current = init_xyt
+    while True:
+        state = SolveState(current, settling.copy(), placement)
+        out.settling_used = state.settling
+        g = graph.build([f for s in sources for f in s.factors(state)])
+        if out.first_solve_initial_cost is None:
+            out.first_solve_initial_cost = float(g.error(values))
+            out.cost_history.append(out.first_solve_initial_cost)
+        values, it = levenberg_marquardt(g, values, cfg, out.cost_history, progress, sched.solves, ordering)
+        sched.solved()
+        out.iterations += it
+        current = graph.from_values(values)
+        done = SolveState(current, settling, placement)
+        updates = [s.update(done) for s in sources]
+        if sched.scale_round_due():
+            restart, settling = _scale_round(walks, placement, sources, graph, sched, out, current, scale)
+            scale = out.scale
+            values = restart if restart is not None else values
+        if not sched.settling():
+            settling = np.zeros(walks.n_walks, bool)
+        if not sched.next_solve(any(u.changed for u in updates), any(u.first_switch for u in updates)):
+            break
+    out.poses, out.raw_scaled, out.solves, out.scale_rounds = current, graph.raw_s, sched.solves, sched.rounds
+    out.n_odometry = graph.n_odo
+    final_state = SolveState(current, out.settling_used, placement)
+    final = graph.build([f for s in sources for f in s.final_factors(final_state)])
+    out.final_cost = float(final.error(values))
+    out.initial_cost = float(final.error(graph.to_values(init_xyt)))
+    return out
+
+
+def _scale_round(walks, placement, sources, graph: _Graph, sched: SolveSchedule, out: SolveOutcome,
+                 current: np.ndarray, scale: np.ndarray):
+    """Re-estimate each linked walk's step-length scale from the pairs near each other; rebuild the
+    odometry and restart from the poses stretched about each walk's centroid when a scale moved.
+    Returns (values to start from, walks still settling)."""
+    cfg = graph.cfg
+    pairs = [s.pairs_near(current) for s in sources]
+    pk = np.concatenate([p[0] for p in pairs])
+    pq = np.concatenate([p[1] for p in pairs])
+    eligible = walks.keep & placement.linked
+    new_scale, fitted = update_scales(current, walks.raw, walks.starts, walks.ends, scale, eligible, pk, pq,
+                                      walks.walk_of, cfg.odometry, normalize=placement.n_anchors == 0)
+    out.scale_fitted |= fitted
+    moved = sched.scale_done(float(np.max(np.abs(new_scale - scale), initial=0.0)))
+    settling = np.abs(new_scale - scale) > schedule.SCALE_EXTEND_MOVE
+    log.debug("scale round %d: %s", sched.rounds, np.round(new_scale, 3).tolist())
+    values = None
+    if moved:
+        stretched = current.copy()
+        for w in np.flatnonzero(new_scale != scale):
+            a, b = walks.starts[w], walks.ends[w]
+            c = current[a:b, :2].mean(axis=0)
+            stretched[a:b, :2] = c + (new_scale[w] / scale[w]) * (current[a:b, :2] - c)
+        graph.set_scale(scaled_raw(walks.raw, walks.starts, walks.ends, new_scale))
+        values = graph.to_values(stretched)
+    out.scale = new_scale if moved else scale
+    return values, settling

@@ -1,0 +1,205 @@
+"""Placement (rmbuild/slam/placement/): refinement, fits, acceptance, merges, reference choice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("gtsam")
+
+from rmbuild.config.optimize import OptimizeConfig, PlacementConfig  # noqa: E402
+from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
+from rmbuild.slam import optimize  # noqa: E402
+from rmbuild.slam.evidence.base import EvidenceSource, Links, RotationPriors  # noqa: E402
+from rmbuild.slam.placement import fits, refine  # noqa: E402
+from rmbuild.slam.placement.grow import window_lengths  # noqa: E402
+from rmbuild.slam.placement.merge import merge_components, orient_components  # noqa: E402
+from rmbuild.slam.placement.model import GrowState, Placement, WalkFit  # noqa: E402
+from rmbuild.slam.problem import covered_m  # noqa: E402
+from rmbuild.slam.testing import make_venue, walk_set  # noqa: E402
+
+
+def _rot_known(theta, known, sigma=np.inf):
+    return RotationPriors(np.asarray(theta, float), np.asarray(known, bool), np.full(len(theta), sigma))
+
+
+def test_refine_walks_recovers_frames():
+    rng = np.random.default_rng(0)
+    n_w, per = 4, 30
+    raw = np.zeros((n_w * per, 3))
+    walk_of = np.repeat(np.arange(n_w), per)
+    truth = np.array([[0, 0, 0], [5, -3, 0.3], [-4, 6, -0.5], [10, 2, 1.0]], float)
+    for w in range(n_w):
+        raw[w * per:(w + 1) * per, :2] = rng.uniform(-10, 10, (per, 2))
+    walks = walk_set(raw, walk_of)
+    world = walks.world_xy(truth, np.arange(len(raw)))
+    # pairs: nodes of different walks whose true positions are within 3 m, plus 30 % random false pairs
+    d = np.linalg.norm(world[:, None] - world[None], axis=2)
+    i, j = np.nonzero((d < 3) & (walk_of[:, None] < walk_of[None, :]))
+    fi, fj = rng.integers(0, len(raw), len(i) // 3), rng.integers(0, len(raw), len(i) // 3)
+    ok = walk_of[fi] != walk_of[fj]
+    nk, nq = np.r_[i, fi[ok]], np.r_[j, fj[ok]]
+    T0 = truth + np.c_[rng.normal(0, 2, (n_w, 2)), rng.normal(0, 0.1, n_w)]
+    T0[0] = truth[0]
+    T = refine.refine_walks(T0, np.ones(n_w, bool), nk, nq, walks, 0, np.full(n_w, np.nan), np.full(n_w, 0.1),
+                            iterations=20)
+    assert np.abs(T[:, :2] - truth[:, :2]).max() < 1.0
+    assert np.abs(T[:, 2] - truth[:, 2]).max() < 0.1  # pairs are within 3 m, not coincident
+
+
+def test_fit_to_scans_translation_and_se2():
+    rng = np.random.default_rng(1)
+    p = np.c_[np.linspace(0, 30, 15), np.zeros(15)]
+    th, t = 0.4, np.array([3.0, -2.0])
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    x = p @ R.T + t + rng.normal(0, 0.5, p.shape)
+    x[:4] += rng.uniform(-30, 30, (4, 2))  # outlier scans
+    path = p[:, 0]
+    cfg = PlacementConfig()
+    f = fits.fit_to_scans(p, x, path, th, cfg, rng)
+    assert f.method == "translation" and f.score >= 10 and np.allclose(f.t[:2], t, atol=1.0)
+    f2 = fits.fit_to_scans(p, x, path, None, cfg, rng)
+    assert f2.method == "se2" and abs(f2.t[2] - th) < 0.1
+    assert covered_m(path[f.inliers]) >= 20
+
+
+def test_grow_links_short_crossing_walks():
+    """Many short walks (~60 steps) with known heading: most are linked and placed."""
+    ds, fp = make_venue(n_walks=14, steps_per_walk=60, seed=11)
+    r = optimize(ds, fp, OptimizeConfig())
+    # 13 of 14 with min_lead = 0; the lead rule (false-pair robustness) rejects 3-vs-1 splits here
+    assert r.walks["linked"].sum() >= 9
+    lm = trajectory_metrics(r.poses, ds)["landmark_error_m"]
+    raw = trajectory_metrics(ds.poses, ds)["landmark_error_m"]
+    assert lm["mean"] < raw["mean"]
+    assert set(r.placement_log["phase"]) >= {"pairs", "knn"} and r.placement_log["accepted"].any()
+
+
+def test_accept_needs_lead_over_second_hypothesis():
+    """A 4-vs-2 inlier split passes the ratio margin but not an absolute lead of 3 (chance alignments)."""
+    f = WalkFit(np.zeros(3), 4, 2, 9.0, 1, "translation", np.ones(3, bool))
+    assert fits.accept_pairs_fit(f, False, PlacementConfig(margin=1.5, min_lead=0))
+    assert not fits.accept_pairs_fit(f, False, PlacementConfig(margin=1.5, min_lead=3))
+    f.second = 0
+    assert fits.accept_pairs_fit(f, False, PlacementConfig(margin=1.5, min_lead=3))
+    g = WalkFit(np.zeros(3), 8, 0, 12.0, 2, "se2", np.ones(8, bool))
+    assert not fits.accept_pairs_fit(g, True, PlacementConfig())  # min_shared_se2_m = 20
+    assert fits.accept_pairs_fit(g, True, PlacementConfig(min_shared_se2_m=12.0))
+    half = WalkFit(np.zeros(3), 6, 6, 9.0, 0, "translation", np.ones(6, bool))
+    assert fits.accept_scans_fit(half, False, PlacementConfig())
+    half.second = 7  # under half of the covered scans
+    assert not fits.accept_scans_fit(half, False, PlacementConfig())
+
+
+def test_window_lengths_cap_at_the_fit_window():
+    raw = np.c_[np.r_[np.arange(0, 91.0), np.arange(0, 3.0)], np.zeros(94), np.zeros(94)]
+    walks = walk_set(raw, np.repeat([0, 1], [91, 3]))
+    assert np.allclose(window_lengths(walks, PlacementConfig()), [60.0, 2.0])
+    assert np.allclose(window_lengths(walks, PlacementConfig(window_m=0.0)), [90.0, 2.0])
+
+
+def _merge_case(consistent: bool):
+    """Reference walk 0 (comp 0) along y = 0; walks 1 and 2 (comp 1, placed against each other) each meet
+    it with 4 candidate pairs 3 m apart: too few for a walk alone (min_inliers_se2 = 6), enough pooled."""
+    ref = np.c_[np.arange(0, 61.0), np.zeros(61), np.zeros(61)]
+    own = np.c_[np.arange(0, 21.0), np.zeros(21), np.zeros(21)]
+    walks = walk_set(np.vstack([ref, own, own]), np.repeat([0, 1, 2], [61, 21, 21]))
+    true_T = np.array([[0, 0, 0], [5, 0, 0], [35, 0, 0]], float)  # pairs join coincident nodes
+    world = walks.world_xy(true_T, np.arange(walks.n))
+    nk, nq = [], []
+    for w in (1, 2):
+        for s in (2, 6, 10, 14):
+            node = 61 + 21 * (w - 1) + s
+            nk.append(int(np.argmin(np.linalg.norm(world[:61] - world[node, :2], axis=1))))
+            nq.append(node)
+    nk, nq = np.array(nk), np.array(nq)
+    if not consistent:
+        nk = np.random.default_rng(0).permutation(nk)
+    # comp 1's own frame: walk 1 at the origin, walk 2 where it truly is relative to walk 1
+    st = GrowState.empty(3, 0, np.zeros(3, bool))
+    st.T[2] = true_T[2] - true_T[1]
+    st.comp[:] = [0, 1, 1]
+    return st, walks, nk, nq, true_T
+
+
+@pytest.mark.parametrize("consistent", [True, False])
+def test_merge_components_pools_a_groups_pairs(consistent):
+    st, walks, nk, nq, true_T = _merge_case(consistent)
+    out, merged = merge_components(st, walks, nk, nq, _rot_known(np.zeros(3), np.zeros(3)), PlacementConfig(), [])
+    if consistent:
+        assert merged and (out.comp == 0).all()
+        assert np.abs(out.T[:, :2] - true_T[:, :2]).max() < 0.3
+        assert np.abs(out.T[:, 2] - true_T[:, 2]).max() < 0.01
+    else:  # pairs that disagree with any rigid placement: the group stays apart
+        assert not merged and (out.comp == np.array([0, 1, 1])).all()
+
+
+def test_orient_components_turns_a_component_to_its_compass():
+    """A further component seeded in its own frame is rotated so its walks' compass rotations agree with
+    the reference's; the reference's component and compass-less components stay."""
+    rot = _rot_known([0.3, 1.2, 1.25, -0.4], [True, True, True, False])
+    # comp 1 = walks 1, 2 placed in walk 1's own frame (walk 2 truly 0.05 rad from walk 1); comp 2 = walk 3
+    st = GrowState.empty(4, 0, rot.known)
+    st.T[2] = (4.0, 1.0, 0.05)
+    st.comp[:] = [0, 1, 1, 2]
+    out = orient_components(st, rot)
+    assert np.allclose(out.T[0], 0) and np.allclose(out.T[3], 0)
+    assert abs(out.T[1, 2] - 0.9) < 0.03 and abs(out.T[2, 2] - 0.95) < 0.03
+    assert np.isclose(np.linalg.norm(out.T[2, :2] - out.T[1, :2]), np.hypot(4, 1))
+    assert np.isclose(out.T[2, 2] - out.T[1, 2], 0.05)
+
+
+class _Links(EvidenceSource):
+    def __init__(self, k, q):
+        self.warnings = []
+        self._l = Links(np.asarray(k), np.asarray(q))
+
+    def links(self):
+        return self._l
+
+
+def test_reference_reselected_when_its_component_is_small(monkeypatch):
+    """The walk with the most links seeds a 1-walk component while 4 walks form another: growth restarts
+    from the best-linked walk of the large component; a configured reference is kept as given."""
+    import rmbuild.slam.placement as P
+
+    n_walks, per = 5, 10
+    raw = np.c_[np.tile(np.arange(per) * 0.7, n_walks), np.zeros(n_walks * per), np.zeros(n_walks * per)]
+    walks = walk_set(raw, np.repeat(np.arange(n_walks), per))
+    # walk 4 has the most cross links (look-alikes), then walk 2
+    k = np.r_[np.full(32, 40), np.full(12, 20), np.full(5, 21)]
+    q = np.r_[np.tile([5, 15, 25, 35], 8), np.full(12, 15), np.full(5, 31)]
+    calls = []
+
+    def fake_grow_from(ref, *args):
+        calls.append(ref)
+        comp = np.array([1, 1, 1, 1, 0]) if ref == 4 else np.array([0, 0, 0, 0, 1])
+        return Placement(np.zeros((n_walks, 3)), comp, ref, np.zeros(n_walks, bool), np.full(n_walks, ""))
+
+    monkeypatch.setattr(P, "_grow_from", fake_grow_from)
+    res = P.place(walks, [_Links(k, q)], PlacementConfig(), None)
+    assert calls == [4, 2]
+    assert res.reference == 2 and res.linked[:4].all() and not res.linked[4]
+    calls.clear()
+    res = P.place(walks, [_Links(k, q)], PlacementConfig(), 1)
+    assert calls == [1] and res.reference == 1
+
+
+@pytest.mark.parametrize("short_walk_m", [0.0, 60.0])
+def test_short_walk_keeps_compass_rotation_in_refinement(monkeypatch, short_walk_m):
+    """A 39 m walk whose pairs say it is turned 10 deg from its compass rotation: the refinement follows
+    the pairs (mostly) unless the walk counts as short, when it keeps the compass's."""
+    monkeypatch.setattr(refine, "SHORT_WALK_M", short_walk_m)
+    n = 40
+    own = np.c_[np.arange(n, dtype=float), np.zeros(n), np.zeros(n)]  # walk 1 in its own frame
+    th = np.deg2rad(10.0)
+    true_xy = own[:, :2] @ np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]]).T + (5.0, 5.0)
+    walks = walk_set(np.vstack([np.c_[true_xy, np.zeros(n)], own]), np.repeat([0, 1], n))
+    T = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 0.0]])  # walk 1 placed at its compass rotation (0)
+    T2 = refine.refine_placed(T, np.ones(2, bool), np.arange(n), np.arange(n) + n, walks, 0, np.zeros(2),
+                              np.array([False, True]), np.full(2, 0.1), 4.0, walks.walk_lengths())
+    got = np.rad2deg(T2[1, 2])
+    if short_walk_m > 0:
+        assert abs(got) < 1.0
+    else:
+        assert got > 5.0
