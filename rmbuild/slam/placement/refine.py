@@ -2,9 +2,11 @@
 
 A robust Gauss-Newton over the frames (x, y, theta) of the placed walks: each link (k, q) between two
 placed walks contributes the 2-D difference of its nodes' world positions (sigma PAIR_SIGMA_M), each walk
-with a trusted compass a rotation prior; both with a Cauchy weight (scale ROBUST_C sigmas), which is
-iteratively reweighted least squares — the walk frames are few, so a dense-enough sparse solve per
-iteration is cheap and needs no factor graph.
+with a trusted compass a rotation prior; both with a Cauchy weight (scale ROBUST_C sigmas) on the
+*norm* of the 2-D difference. Solved by iteratively reweighted Gauss-Newton (a few hundred frames: one
+sparse solve per iteration). Written out because neither library fits: scipy's ``least_squares`` applies
+its robust loss per scalar residual (x and y apart, an anisotropic kernel), and gtsam has no built-in
+factor for a node pair seen through two walk frames.
 """
 
 from __future__ import annotations
