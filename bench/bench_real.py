@@ -46,13 +46,24 @@ PREDICTED_ERROR_COLUMNS = ("predicted_error_m", "placement_error_m", "confidence
 
 
 # ---------------------------------------------------------------------------------------------- running
+def rmbuild_root() -> Path:
+    """The directory holding the ``rmbuild`` package this process imports (PYTHONPATH, else installed)."""
+    import rmbuild
+
+    return Path(rmbuild.__file__).resolve().parents[1]
+
+
 def run_cli(args: list[str], log_path: Path) -> dict:
-    """One ``python -m rmbuild ARGS`` subprocess: wall time (s), its own peak RSS (MB), return code."""
-    env = {**os.environ, "MPLBACKEND": "Agg"}
+    """One ``python -m rmbuild ARGS`` subprocess: wall time (s), its own peak RSS (MB), return code.
+
+    The subprocess imports the same ``rmbuild`` as this process (its root first on PYTHONPATH, and a
+    working directory without a package of that name), so the code run is the code recorded."""
+    path = os.pathsep.join(p for p in (str(rmbuild_root()), os.environ.get("PYTHONPATH", "")) if p)
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": path}
     t0 = time.perf_counter()
     with log_path.open("w") as log:
         p = subprocess.Popen([sys.executable, "-m", "rmbuild", *args], stdout=log, stderr=subprocess.STDOUT,
-                             env=env, cwd=REPO)
+                             env=env, cwd=log_path.parent)
         _, status, usage = os.wait4(p.pid, 0)
     p.returncode = os.waitstatus_to_exitcode(status)
     return {"s": round(time.perf_counter() - t0, 2), "peak_mb": round(usage.ru_maxrss / 1024, 1),
@@ -421,9 +432,7 @@ def markdown(result: dict) -> str:
 
 
 def code_identity() -> dict:
-    import rmbuild
-
-    pkg = Path(rmbuild.__file__).resolve().parent
+    pkg = rmbuild_root() / "rmbuild"
 
     def git(*a: str) -> str | None:
         p = subprocess.run(["git", *a], cwd=pkg, capture_output=True, text=True)
@@ -450,13 +459,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scratch", type=Path, default=DEFAULT_SCRATCH, help="where the workspaces go")
     ap.add_argument("--jobs", type=int, default=1, help="floors run in parallel")
     a = ap.parse_args(argv)
-    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS))
+    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)).resolve()
+    scratch = a.scratch.resolve()  # the stages run in their log directory
     if not root.is_dir():
         print(f"bench-real: no datasets at {root} (set RMBUILD_DATASETS); skipped")
         return 0
     floors = select_floors(a.floors)
     with ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
-        rows = list(pool.map(lambda f: measure_floor(f, root, a.scratch), floors))
+        rows = list(pool.map(lambda f: measure_floor(f, root, scratch), floors))
     result = {"code": code_identity(), "dataset_root_name": root.name, "date": time.strftime("%Y-%m-%d"),
               "floors": rows}
     p = write_result(a.out, result)
