@@ -9,7 +9,7 @@ SEED ?= 7
 
 RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
 
-.PHONY: venv run test bench lint clean
+.PHONY: venv run test bench bench-real lint clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
@@ -48,6 +48,12 @@ test: $(STAMP)
 ## make bench: benchmarks; figures go to bench/results/*.json and bench/results/SUMMARY.md
 bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
+
+## make bench-real: ingest -> optimize -> export-map -> evaluate on every real floor with ground truth
+## (RMBUILD_DATASETS, default ../shared/datasets); bench/results/real.json and real.md.
+## Options through BENCH_REAL_ARGS, e.g. BENCH_REAL_ARGS="--floors F1,F4 --out real_after"
+bench-real: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m bench.bench_real $(BENCH_REAL_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench

@@ -1,0 +1,52 @@
+"""The scoring helpers of bench/bench_real.py (the real-floor benchmark must keep measuring the same thing)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from bench.bench_real import aligned_errors, at_fix_times, fit_se2, linked_walks, shared_path_share
+
+
+def test_fit_se2_recovers_a_rigid_transform_and_errors_vanish():
+    rng = np.random.default_rng(3)
+    src = rng.uniform(-20, 20, (50, 2))
+    th = 0.7
+    r = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    dst = src @ r.T + np.array([5.0, -3.0])
+    r_fit, t_fit = fit_se2(src, dst)
+    assert np.allclose(r_fit, r, atol=1e-9) and np.allclose(t_fit, [5.0, -3.0], atol=1e-9)
+    # fitted on the first half only, the second half (same transform) is still exact; a NaN stays NaN
+    est = src.copy()
+    est[-1] = np.nan
+    fit = np.arange(50) < 25
+    e = aligned_errors(est, dst, fit)
+    assert np.nanmax(e) < 1e-9 and np.isnan(e[-1])
+
+
+def test_at_fix_times_interpolates_within_a_walk_and_is_nan_outside():
+    poses = pd.DataFrame({"walk_id": ["a", "a", "b", "b"], "t_s": [0.0, 10.0, 0.0, 4.0],
+                          "x_m": [0.0, 10.0, 100.0, 100.0], "y_m": [0.0, 0.0, 0.0, 8.0]})
+    fixes = pd.DataFrame({"walk_id": ["a", "a", "b", "c"], "t_s": [2.5, 11.0, 1.0, 1.0]})
+    xy = at_fix_times(poses, fixes)
+    assert np.allclose(xy[0], [2.5, 0.0]) and np.allclose(xy[2], [100.0, 2.0])
+    assert np.isnan(xy[1]).all() and np.isnan(xy[3]).all()  # after the walk's last pose; unknown walk
+
+
+def test_shared_path_share_counts_path_within_5m_of_another_walk():
+    t = np.arange(5.0)
+    fixes = pd.concat([
+        pd.DataFrame({"walk_id": "a", "t_s": t, "x_m": 10.0 * t, "y_m": 0.0}),
+        pd.DataFrame({"walk_id": "b", "t_s": t, "x_m": 10.0 * t, "y_m": 3.0}),  # 3 m beside a: shared
+        pd.DataFrame({"walk_id": "c", "t_s": t, "x_m": 20.0 + 5.0 * t, "y_m": 20.0}),  # 17 m from b: not
+    ])
+    share = shared_path_share(fixes)
+    assert share["a"] == 1.0 and share["b"] == 1.0 and share["c"] == 0.0
+
+
+def test_linked_walks_reads_the_walk_table_then_the_poses_then_assumes_all():
+    poses = pd.DataFrame({"walk_id": ["a", "b"], "linked": [True, False]})
+    walks = pd.DataFrame({"walk_id": ["a", "b"], "linked": [False, True]})
+    assert linked_walks(walks, poses) == {"b"}
+    assert linked_walks(None, poses) == {"a"}
+    assert linked_walks(walks.drop(columns="linked"), poses.drop(columns="linked")) == {"a", "b"}
