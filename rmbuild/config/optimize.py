@@ -1,7 +1,8 @@
 """Config of `rmbuild optimize`: one table per part of the back end (docs/optimize.md).
 
 ``[optimize.odometry]`` the dead reckoning along each walk, ``[optimize.wifi]`` the Wi-Fi vicinity
-evidence, ``[optimize.compass]`` the phone's absolute heading, ``[optimize.anchors]`` known positions,
+evidence, ``[optimize.compass]`` the phone's absolute heading, ``[optimize.continuity]`` walks recorded one
+after the other by one device, ``[optimize.anchors]`` known positions,
 ``[optimize.placement]`` how walks get their initial frames, ``[optimize.solve]`` the joint solve.
 "paper" marks the value of Gu et al.'s published model where it has one (docs/references.md);
 :func:`paper_config` builds that model from the same fields. The measurements that chose the defaults
@@ -89,6 +90,22 @@ class CompassConfig:
 
 
 @dataclass(frozen=True)
+class ContinuityConfig:
+    # tie a walk's last pose to the first pose of the same device's next walk (walks recorded one after the
+    # other by one surveyor); off automatically for a device whose walks overlap in time (relative clocks).
+    use: bool = True
+    # s; longest gap between one walk's end and the next one's start that still ties them.
+    max_gap_s: float = 60.0
+    # m/s; the tie's 1-sigma grows by this per second of gap (2 m at no gap): how far the surveyor may
+    # have moved between the two recordings.
+    speed_m_s: float = 0.4
+
+    def validate(self) -> None:
+        if self.max_gap_s < 0 or self.speed_m_s < 0:
+            raise ValueError("need max_gap_s >= 0 and speed_m_s >= 0")
+
+
+@dataclass(frozen=True)
 class AnchorConfig:
     # m; 1-sigma of an anchor's position prior.
     sigma_m: float = 0.5
@@ -155,12 +172,13 @@ class OptimizeConfig:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     wifi: WifiConfig = field(default_factory=WifiConfig)
     compass: CompassConfig = field(default_factory=CompassConfig)
+    continuity: ContinuityConfig = field(default_factory=ContinuityConfig)
     anchors: AnchorConfig = field(default_factory=AnchorConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
     solve: SolveConfig = field(default_factory=SolveConfig)
 
     def validate(self) -> None:
-        for sub in (self.odometry, self.wifi, self.compass, self.anchors, self.placement, self.solve):
+        for sub in (self.odometry, self.wifi, self.compass, self.continuity, self.anchors, self.placement, self.solve):
             sub.validate()
 
 
@@ -171,6 +189,7 @@ def paper_config(**overrides) -> OptimizeConfig:
         odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0, estimate_scale=False),
         wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, e_max=1.0, omega=1.0, across_ratio=1.0),
         compass=CompassConfig(use=False, prior_every_n=0),
+        continuity=ContinuityConfig(use=False),
         placement=PlacementConfig(method="origin"),
         # one node per step, as published (with the paper's weak odometry the composed keyframe factors
         # linearise differently enough to move its folded solutions)

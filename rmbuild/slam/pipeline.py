@@ -130,6 +130,7 @@ def optimize(
     cand = wifi.candidates.assign(used=wifi.used_mask())
     stats = _stats(walks, placement, outcome, checks, pairs, cand, [static] + per_source, timing, warnings, cfg)
     stats["vicinity"] = {**wifi.report(), "anisotropic_pairs": int(pairs["anisotropic"].sum())}
+    stats["evidence"] = {s.name: s.report() for s in sources if s is not wifi}
     return OptimizeResult(
         poses=walks.poses_frame(dataset.poses, final_xyt), initial_poses=walks.poses_frame(dataset.poses, init_xyt),
         pairs=pairs, candidates=cand, walks=walks_df, stats=stats, cost_history=outcome.cost_history,

@@ -27,7 +27,8 @@ class WalkSet:
     ``ends`` (n_walks,) node range of each walk; ``path`` (n,) metres walked since the walk's start;
     ``t_s`` / ``step`` (n,); ``keep`` (n_walks,) walks that take part (a walk of < 2 poses is skipped);
     ``yaw_abs`` / ``yaw_sigma`` (n,) absolute (compass) heading per step and its 1-sigma [rad], NaN where
-    none; ``fingerprints``: the Wi-Fi fingerprints of the kept walks' nodes.
+    none; ``fingerprints``: the Wi-Fi fingerprints of the kept walks' nodes; ``device`` (n_walks,) the
+    device that recorded each walk ("" when unknown).
     """
 
     walk_ids: list[str]
@@ -42,6 +43,7 @@ class WalkSet:
     yaw_abs: np.ndarray
     yaw_sigma: np.ndarray
     fingerprints: Fingerprints
+    device: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -97,8 +99,10 @@ class WalkSet:
         ysig = poses["yaw_abs_sigma_rad"].to_numpy(float) if "yaw_abs_sigma_rad" in poses else np.full(n, np.nan)
         ysig = np.where(np.isfinite(ysig) & (ysig > 0), ysig, default_yaw_sigma_rad)
         active = keep[walk_of]
+        dev = (dataset.walks["device_id"].fillna("").astype(str).to_numpy(object) if "device_id" in dataset.walks
+               else np.full(len(walk_ids), "", dtype=object))
         ws = WalkSet(walk_ids, raw, walk_of, starts, ends, path, poses["t_s"].to_numpy(float),
-                     poses["step"].to_numpy(), keep, yaw, ysig, fingerprints.subset(active[fingerprints.node]))
+                     poses["step"].to_numpy(), keep, yaw, ysig, fingerprints.subset(active[fingerprints.node]), dev)
         return ws, warnings
 
 

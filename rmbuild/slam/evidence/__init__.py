@@ -8,17 +8,20 @@ from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.slam.evidence.anchors import AnchorSource
 from rmbuild.slam.evidence.base import EvidenceSource
 from rmbuild.slam.evidence.compass import CompassSource
+from rmbuild.slam.evidence.continuity import ContinuitySource
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.problem import WalkSet
 
-__all__ = ["AnchorSource", "CompassSource", "EvidenceSource", "WifiSource", "default_sources"]
+__all__ = ["AnchorSource", "CompassSource", "ContinuitySource", "EvidenceSource", "WifiSource", "default_sources"]
 
 
 def default_sources(walks: WalkSet, cfg: OptimizeConfig, anchors: pd.DataFrame | None = None, progress=None,
                     candidates_hook: CandidatesHook | None = None) -> list[EvidenceSource]:
     """The sources every run uses, in the order their links and static factors are gathered."""
+    wifi = WifiSource(walks, cfg.wifi, progress, candidates_hook)
     return [
-        WifiSource(walks, cfg.wifi, progress, candidates_hook),
+        wifi,
+        ContinuitySource(walks, cfg.continuity, wifi.rf, wifi.rss, walks.fingerprints.node),
         AnchorSource(walks, anchors, cfg.anchors),
         CompassSource(walks, cfg.compass),
     ]

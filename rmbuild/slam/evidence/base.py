@@ -10,6 +10,8 @@ questions, in this order, and never looks inside one:
    - :meth:`scan_locator` — an object that localises a walk's scans on the map placed so far (kNN
      growth), or None;
    - :meth:`rotation_priors` — per walk, the rotation of its own frame in a common world (compass);
+   - :meth:`ties` — position ties between walks (one walk's end and the next one's start), which join
+     components of walks placed apart;
    - :meth:`place` — move the placed components afterwards (anchors put them into the building frame).
 2. **Solve set-up** (:mod:`rmbuild.slam.solve`), after placement: :meth:`prepare` with the initial
    poses, then :meth:`required_nodes` (the nodes its factors touch: the keyframes of the chain reduction)
@@ -45,6 +47,19 @@ class Links:
 
     def __len__(self) -> int:
         return len(self.node_k)
+
+
+@dataclass
+class Ties:
+    """Position ties between nodes of different walks: ``node_a`` / ``node_b`` (m,) lie within about
+    ``sigma_m`` (m,) of each other (e.g. one walk's end and the next walk's start)."""
+
+    node_a: np.ndarray
+    node_b: np.ndarray
+    sigma_m: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.node_a)
 
 
 @dataclass
@@ -99,6 +114,9 @@ class EvidenceSource(ABC):  # noqa: B024 - every method has a default: a source 
         return None
 
     def rotation_priors(self) -> RotationPriors | None:
+        return None
+
+    def ties(self) -> Ties | None:
         return None
 
     def place(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:

@@ -25,6 +25,7 @@ from rmbuild.slam.evidence.base import EvidenceSource, Links, SolveState, Update
 from rmbuild.slam.factors import anisotropic_factor, anisotropic_noise, vicinity_factor, vicinity_noise
 from rmbuild.slam.pairs import RowMeta, SearchParams, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.problem import WalkSet
+from rmbuild.slam.rfmodel import calibrate
 from rmbuild.slam.rss import RssMatrix
 
 # A same-walk pair is kept when its two nodes lie, by the walk's own dead reckoning, within this distance
@@ -87,6 +88,8 @@ class WifiSource(EvidenceSource):
             cand = candidates_hook(cand, walks)
         self.candidates = cand.reset_index(drop=True)
         self.n_searched = len(self.candidates)
+        self.rf = calibrate(self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s,
+                            cfg.min_common_aps)
         self._cross_all = self._is_cross(self.candidates)
 
     # ------------------------------------------------------------------------------------ placement
@@ -237,7 +240,7 @@ class WifiSource(EvidenceSource):
     def report(self) -> dict:
         across = self._used[1]
         return {"across_ratio": float(across), "estimated": bool(self.across_auto),
-                "estimated_from_pairs": self.across_n}
+                "estimated_from_pairs": self.across_n, "rf_model": self.rf.report()}
 
 
 def is_parallel(rel: np.ndarray) -> np.ndarray:

@@ -18,70 +18,93 @@ from rmbuild.slam.problem import WalkSet
 
 def merge_components(st: GrowState, walks: WalkSet, nk: np.ndarray, nq: np.ndarray, rot: RotationPriors,
                      cfg: PlacementConfig, log: list) -> tuple[GrowState, bool]:
-    """Fit whole secondary components (walks placed against each other but not against the reference's
-    map) rigidly to component 0, largest first, until none is accepted; returns (state, merged any).
+    """Fit whole components (walks placed against each other) rigidly onto other components — component 0
+    first, then the others, largest first — until none is accepted; returns (state, merged any).
 
-    A component of several short walks pools its links to the map: each walk alone may lack the shared
-    path a fit needs while the group has it. The fit is :func:`fit_to_pairs` with the component's frame as
-    the walk frame (translation-only when the compass gives the component's rotation, SE(2) otherwise) and
-    the same acceptance; shared path sums over the component's walks. Single-walk components are not
-    retried (the walk-to-map growth already failed them).
+    A component of several short walks pools its links: each walk alone may lack the shared path a fit
+    needs while the group has it. The fit is :func:`fit_to_pairs` with the moving component's frame as the
+    walk frame (translation-only when the compass gives the relative rotation, SE(2) otherwise) and the
+    same acceptance; shared path sums over the component's walks. Single-walk components are not moved
+    (growth already tried them).
     """
     rng = np.random.default_rng(RANSAC_SEED + 1)
     st = st.copy()
-    ref = st.reference
-    wo = walks.walk_of
-    wk, wq = wo[nk], wo[nq]
-    walk_len = walks.walk_lengths()
     merged_any = False
     while True:
-        placed = st.comp == 0
         sizes = np.bincount(st.comp, minlength=int(st.comp.max()) + 1)
-        order = [c for c in np.argsort(-sizes, kind="stable") if c > 0 and sizes[c] >= 2]
+        order = [int(c) for c in np.argsort(-sizes, kind="stable") if c > 0 and sizes[c] >= 2]
+        targets = [0] + [int(d) for d in np.argsort(-sizes, kind="stable") if d > 0 and sizes[d] >= 1]
         done = False
         for c in order:
-            members = st.comp == c
-            m = (placed[wk] & members[wq]) | (placed[wq] & members[wk])
-            if m.sum() < cfg.min_inliers:
-                continue
-            rows = np.flatnonzero(m)
-            mnode = np.where(placed[wk[rows]], nk[rows], nq[rows])
-            cnode = np.where(placed[wk[rows]], nq[rows], nk[rows])
-            pm, pc = walks.world_xy(st.T, mnode), walks.world_xy(st.T, cnode)
-            # walked distance made distinct per walk so the shared path sums the component's walks
-            cpath = walks.path[cnode] + wo[cnode] * (np.ceil(walk_len.max()) + 10.0)
-            hm = members & st.heading_used & rot.known
-            prior = component_compass_offset(st.T, hm, rot, ref) if rot.known[ref] and hm.any() else np.nan
-            f, ok = None, False
-            if np.isfinite(prior):
-                f = fit_to_pairs(pm, pc, cnode, cpath, wo[mnode], prior, cfg, rng)
-                ok = accept_pairs_fit(f, False, cfg)
-            if not ok:
-                f2 = fit_to_pairs(pm, pc, cnode, cpath, wo[mnode], None, cfg, rng)
-                if accept_pairs_fit(f2, True, cfg):
-                    f, ok = f2, True
-            log.append({"phase": "merge", "component": int(c), "walks": int(members.sum()), "accepted": bool(ok),
-                        "score": f.score if f else 0, "second": f.second if f else 0,
-                        "shared_m": f.shared_m if f else 0.0, "method": f.method if f else "",
-                        "pairs": len(rows), "T": None if f is None else f.t.tolist()})
-            if not ok or f is None:
-                continue
-            st.T[members] = geometry.compose(f.t, st.T[members])
-            st.comp[members] = 0
-            st.method[members] = "merge"
-            if f.method == "se2":
-                st.heading_used[members] = False
-            done = merged_any = True
-            break  # the map grew: recompute sizes and links
+            for d in targets:
+                if d != c and _merge_one(st, walks, nk, nq, rot, cfg, rng, c, d, log):
+                    done = merged_any = True
+                    break
+            if done:
+                break  # the components changed: recompute sizes and links
         if not done:
             break
     if not merged_any:
         return st, False
     placed = st.comp == 0
-    st.T = refine_placed(st.T, placed, nk, nq, walks, ref, compass_priors(rot, ref), st.heading_used, rot.sigma,
-                         cfg.gate_m, window_lengths(walks, cfg))
+    st.T = refine_placed(st.T, placed, nk, nq, walks, st.reference, compass_priors(rot, st.reference),
+                         st.heading_used, rot.sigma, cfg.gate_m, window_lengths(walks, cfg))
     _, st.comp = np.unique(st.comp, return_inverse=True)  # renumber the rest 1, 2, ... in their old order
     return st, True
+
+
+def _merge_one(st: GrowState, walks: WalkSet, nk: np.ndarray, nq: np.ndarray, rot: RotationPriors,
+               cfg: PlacementConfig, rng: np.random.Generator, c: int, d: int, log: list) -> bool:
+    """Fit component c onto component d from their links; on acceptance move c into d (in place)."""
+    wo = walks.walk_of
+    wk, wq = wo[nk], wo[nq]
+    placed, members = st.comp == d, st.comp == c
+    m = (placed[wk] & members[wq]) | (placed[wq] & members[wk])
+    if m.sum() < cfg.min_inliers:
+        return False
+    rows = np.flatnonzero(m)
+    mnode = np.where(placed[wk[rows]], nk[rows], nq[rows])
+    cnode = np.where(placed[wk[rows]], nq[rows], nk[rows])
+    pm, pc = walks.world_xy(st.T, mnode), walks.world_xy(st.T, cnode)
+    # walked distance made distinct per walk so the shared path sums the component's walks
+    cpath = walks.path[cnode] + wo[cnode] * (np.ceil(walks.walk_lengths().max()) + 10.0)
+    prior = _relative_compass(st, rot, c, d)
+    f, ok = None, False
+    if np.isfinite(prior):
+        f = fit_to_pairs(pm, pc, cnode, cpath, wo[mnode], prior, cfg, rng)
+        ok = accept_pairs_fit(f, False, cfg)
+    if not ok:
+        f2 = fit_to_pairs(pm, pc, cnode, cpath, wo[mnode], None, cfg, rng)
+        if accept_pairs_fit(f2, True, cfg):
+            f, ok = f2, True
+    log.append({"phase": "merge", "component": int(c), "onto": int(d), "walks": int(members.sum()),
+                "accepted": bool(ok), "score": f.score if f else 0, "second": f.second if f else 0,
+                "shared_m": f.shared_m if f else 0.0, "method": f.method if f else "", "pairs": len(rows),
+                "T": None if f is None else f.t.tolist()})
+    if not ok or f is None:
+        return False
+    st.T[members] = geometry.compose(f.t, st.T[members])
+    st.comp[members] = d
+    st.method[members] = "merge"
+    if f.method == "se2":
+        st.heading_used[members] = False
+    return True
+
+
+def _relative_compass(st: GrowState, rot: RotationPriors, c: int, d: int) -> float:
+    """Rotation (rad) taking component c's frame to component d's by the compass (NaN without one): the
+    reference component's frame is the compass frame (d = 0); another's is its own seed's."""
+    ref = st.reference
+    if not rot.known[ref]:
+        return np.nan
+    hc = (st.comp == c) & st.heading_used & rot.known
+    if not hc.any():
+        return np.nan
+    off_c = component_compass_offset(st.T, hc, rot, ref)
+    if d == 0:
+        return off_c
+    hd = (st.comp == d) & st.heading_used & rot.known
+    return float(geometry.wrap(off_c - component_compass_offset(st.T, hd, rot, ref))) if hd.any() else np.nan
 
 
 def orient_components(st: GrowState, rot: RotationPriors) -> GrowState:
