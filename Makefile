@@ -6,10 +6,12 @@ STAMP := $(VENV)/.installed
 RUN_DIR ?= runs/default
 PRESET ?= default
 SEED ?= 7
+REAL_DIR ?= runs/real
+REAL_DATA ?= datasets/msft-ilc20/site1/F1
 
 RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
 
-.PHONY: venv run test bench bench-real lint clean
+.PHONY: venv run run-real test bench bench-real lint clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
@@ -39,6 +41,22 @@ run: $(STAMP)
 	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
 	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
+
+## make run-real: the whole pipeline on the real sample in datasets/ (12 MS ILC 2.0 phone walks of one floor)
+run-real: $(STAMP)
+	$(RM_CLI) ingest $(REAL_DATA) -w $(REAL_DIR)/workspace --format msft-ilc --force
+	$(RM_CLI) optimize -w $(REAL_DIR)/workspace
+	$(RM_CLI) export-map -w $(REAL_DIR)/workspace
+	$(RM_CLI) evaluate -w $(REAL_DIR)/workspace
+	$(RM_CLI) report -w $(REAL_DIR)/workspace
+	@echo
+	@echo "results:"
+	@echo "  input (real traces + floor plan, MIT):  $(REAL_DATA)"
+	@echo "  workspace:                              $(REAL_DIR)/workspace"
+	@echo "  stage reports:                          $(REAL_DIR)/workspace/reports/*.json"
+	@echo "  aligned walks (TUM files for evo):      $(REAL_DIR)/workspace/optimize/"
+	@echo "  radio map:                              $(REAL_DIR)/workspace/map/"
+	@echo "  HTML report:                            $(REAL_DIR)/workspace/report.html"
 
 ## make test: ruff + the pytest suite
 test: $(STAMP)

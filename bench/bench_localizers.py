@@ -7,7 +7,7 @@ walks, 2 m cells) and the test walks' scans:
   (b) different device, uncalibrated: k = 1.25, b = −6 dB (φ_device = k ψ + b) — same walks and noise;
   (c) (b) with the offline linear fit from co-located readings: both devices scan 60 spots on the test
       walks' tracks 20 times each, standing; per (spot, AP) means where both detect the AP in >= 60 % of
-      scans; OLS device = k · map + b (seed 000's offline calibration). Queries mapped back with it; SLAC then
+      scans; OLS device = k · map + b (He et al. 2015, ref. [21]). Queries mapped back with it; SLAC then
       runs with [k, b] fixed at (1, 0) (P = 1); kNN "true calibration" maps them back with the true k, b.
 Real data: UJI long-term month 25 (Galaxy S3 map, Galaxy A5 test sets), fingerprint-only localizers.
 Latency: the `large` preset's surveyed map (1 m cells, >= 1,000 RPs); per-scan wall time of each localizer

@@ -57,7 +57,7 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def increments(p: np.ndarray) -> np.ndarray:
-    """Body-frame increments (n-1, 3) between consecutive poses p (n, 3) (odometry, seed 001 eq. 6)."""
+    """Body-frame increments (n-1, 3) between consecutive poses p (n, 3) (odometry, Gu et al. 2017 eq. 6)."""
     return between(p[:-1], p[1:])
 
 

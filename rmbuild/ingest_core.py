@@ -1,4 +1,4 @@
-"""Shared validation of read input, and attachment of Wi-Fi readings to pose nodes (METHOD.md §1).
+"""Shared validation of read input, and attachment of Wi-Fi readings to pose nodes (docs/data-format.md).
 
 Pure: takes a :class:`RawInput` from any reader, returns the :class:`Dataset`, the per-node
 :class:`Fingerprints` and a summary dict. Every problem is an :class:`InputError` naming file and row.

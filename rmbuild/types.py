@@ -21,7 +21,7 @@ WALK_COLUMNS = ("walk_id", "device_id", "user_id", "role", "source")
 POSE_COLUMNS = (
     "walk_id", "step", "t_s", "x_m", "y_m", "heading_rad", "yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz",
 )
-#: Wi-Fi readings; ``node`` = the pose node the reading is attached to (METHOD.md §1).
+#: Wi-Fi readings; ``node`` = the pose node the reading is attached to (docs/data-format.md).
 WIFI_COLUMNS = ("walk_id", "t_s", "bssid", "rssi_dbm", "freq_mhz", "ssid", "node")
 #: Ground-truth position fixes (landmarks / waypoints), building frame.
 FIX_COLUMNS = ("walk_id", "t_s", "x_m", "y_m", "label")
@@ -76,7 +76,7 @@ class Dataset:
 
 @dataclass
 class Fingerprints:
-    """Per-node fingerprints: the per-AP mean RSSI of the readings attached to each node (METHOD.md §1).
+    """Per-node fingerprints: the per-AP mean RSSI of the readings attached to each node (docs/data-format.md).
 
     ``node``: int64 (n,) node ids that have at least one reading, ascending.
     ``bssids``: (n_ap,) AP identifiers, column order of the matrices.
@@ -97,7 +97,7 @@ class Fingerprints:
         return ~np.isnan(self.rss_dbm)
 
     def filled(self, fill_dbm: float = -110.0) -> np.ndarray:
-        """float32 (n, n_ap) with missing readings replaced by ``fill_dbm`` (METHOD.md §3)."""
+        """float32 (n, n_ap) with missing readings replaced by ``fill_dbm`` (Gu et al. 2017)."""
         out = self.rss_dbm.copy()
         out[np.isnan(out)] = fill_dbm
         return out

@@ -1,4 +1,4 @@
-"""SLAC (seed 000): its kernels against brute force, calibration on the synthetic venue, bad input."""
+"""SLAC (He et al. 2015): its kernels against brute force, calibration on the synthetic venue, bad input."""
 
 from __future__ import annotations
 

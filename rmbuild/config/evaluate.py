@@ -1,4 +1,4 @@
-"""Config of `rmbuild evaluate` and of the fingerprint localizers (METHOD.md §8)."""
+"""Config of `rmbuild evaluate` and of the fingerprint localizers (docs/localizers.md)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,17 @@ from rmbuild.config.localize import BayesConfig, PflConfig, SlacConfig, Smoothin
 
 @dataclass(frozen=True)
 class KnnConfig:
-    """FL / kNN and distance-weighted kNN (seed 000 baseline, seed 004 eq. 3-4)."""
+    """FL / kNN and distance-weighted kNN (He et al. 2015 baseline, Chen et al. 2018 eq. 3-4)."""
 
-    # 1; K nearest reference points (seed 000's comparison: 15).
+    # 1; K nearest reference points (He et al. 2015's comparison: 15).
     k: int = 15
-    # "fill": a missing reading counts as fill_dbm (METHOD.md §3); "exclude": distances use only the APs
+    # "fill": a missing reading counts as fill_dbm (Gu et al. 2017); "exclude": distances use only the APs
     # detected in both the query and the reference point.
     missing: Literal["fill", "exclude"] = "fill"
-    # dBm; value of a missing reading under missing = "fill" (seed 001: -110).
+    # dBm; value of a missing reading under missing = "fill" (Gu et al. 2017: -110).
     fill_dbm: float = -110.0
     # "euclidean": sqrt(Σ_j (a_j − b_j)²) (plain; scikit-learn's metric on filled vectors);
-    # "rms": sqrt(Σ_j (a_j − b_j)² / M), M = |union| of detected APs under "fill" (seed 001 eq. 9) or
+    # "rms": sqrt(Σ_j (a_j − b_j)² / M), M = |union| of detected APs under "fill" (Gu et al. 2017 eq. 9) or
     # |shared| under "exclude" (also the normalisation used by "exclude" with either choice).
     metric: Literal["euclidean", "rms"] = "euclidean"
     # 1; under missing = "exclude", a reference point sharing fewer APs with the query is never a neighbour.
@@ -52,8 +52,8 @@ class EvaluateConfig:
     # fingerprint is one query.
     query: Literal["scan", "node"] = "scan"
     knn: KnnConfig = field(default_factory=KnnConfig)
-    # the other localizers (docs/localizers.md): SLAC (seed 000), naive Bayes (seed 002), SSD, PFL, and the
-    # Kalman post-filter of the *_kf variants (seed 003)
+    # the other localizers (docs/localizers.md): SLAC (He et al. 2015), naive Bayes (Becker et al. 2015), SSD,
+    # PFL, and the Kalman post-filter of the *_kf variants (subway-station paper)
     slac: SlacConfig = field(default_factory=SlacConfig)
     nb: BayesConfig = field(default_factory=BayesConfig)
     ssd: SsdConfig = field(default_factory=SsdConfig)

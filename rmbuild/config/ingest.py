@@ -8,7 +8,7 @@ from typing import Literal
 
 @dataclass(frozen=True)
 class IngestConfig:
-    # How Wi-Fi readings attach to pose nodes (METHOD.md §1): "interval" gives node k the readings with
+    # How Wi-Fi readings attach to pose nodes (docs/data-format.md): "interval" gives node k the readings with
     # t_k <= t < t_{k+1}; "nearest" gives each reading to the node nearest in time.
     attach: Literal["interval", "nearest"] = "interval"
     # s; readings farther than this (in time) from the walk's first/last pose are dropped, not attached.

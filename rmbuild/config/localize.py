@@ -1,8 +1,9 @@
 """Config of the sequence and calibration-aware localizers: SLAC, naive Bayes, PFL, SSD, Kalman smoothing.
 
-Every number the papers give is a field with its paper default (METHOD.md §8; seed 000 for SLAC, PFL and
-SSD, seed 002 for naive Bayes, seed 003 for Kalman smoothing, seed 004 for the particle step/heading
-corrections). Fields the papers leave open carry our default and say so.
+Every number the papers give is a field with its paper default (docs/localizers.md; docs/references.md:
+He et al. 2015 for SLAC, PFL and SSD, Becker et al. 2015 for naive Bayes, the subway-station paper for
+Kalman smoothing, Chen et al. 2018 for the particle step/heading corrections). Fields the papers leave open
+carry our default and say so.
 """
 
 from __future__ import annotations
@@ -27,40 +28,40 @@ def _positive(name: str, v: float) -> None:
 
 @dataclass(frozen=True)
 class SlacConfig:
-    """SLAC: simultaneous localization and calibration (seed 000 eq. 5-29, Algorithm 1)."""
+    """SLAC: simultaneous localization and calibration (He et al. 2015 eq. 5-29, Algorithm 1)."""
 
-    # scans; sliding window M of temporal targets jointly localized (seed 000: 7).
+    # scans; sliding window M of temporal targets jointly localized (He et al. 2015: 7).
     window_scans: int = 7
-    # 1; particles P over the device model [k, b] (seed 000: 60).
+    # 1; particles P over the device model [k, b] (He et al. 2015: 60).
     n_particles: int = 60
-    # m; σ_w, sensitivity of the particle weight to walked vs. estimated distance (eq. 22; seed 000: 1).
+    # m; σ_w, sensitivity of the particle weight to walked vs. estimated distance (eq. 22; He et al. 2015: 1).
     sigma_w_m: float = 1.0
-    # 1; η, confidence factor of the convergence test ξ <= η sqrt(Var δ) (eq. 29; seed 000: 1).
+    # 1; η, confidence factor of the convergence test ξ <= η sqrt(Var δ) (eq. 29; He et al. 2015: 1).
     eta: float = 1.0
-    # m; T, Berhu loss threshold (eq. 17; seed 000: 2).
+    # m; T, Berhu loss threshold (eq. 17; He et al. 2015: 2).
     berhu_t_m: float = 2.0
-    # 1; N, candidate RPs per scan (the N smallest Γ) and the count in λ = max Γ / Σ Γ (eq. 14; seed 000: 10).
+    # 1; N, candidate RPs per scan (the N smallest Γ) and the count in λ = max Γ / Σ Γ (eq. 14; He et al. 2015: 10).
     n_candidates: int = 10
     # 1; an RP sharing fewer than this fraction of a scan's detected APs is not a candidate for it (ours:
     # Γ averages over shared APs only, so RPs sharing one lucky AP would win; when no RP reaches it, the
-    # RPs sharing the most APs are the candidates). 0 = seed 000 as written.
+    # RPs sharing the most APs are the candidates). 0 = He et al. 2015 as written.
     min_shared_fraction: float = 0.8
-    # 1; g >= 1, signal bound γ = g Σ_m min_q Γ (eq. 19). Not given in seed 000; ours. Raised to the
+    # 1; g >= 1, signal bound γ = g Σ_m min_q Γ (eq. 19). Not given in He et al. 2015; ours. Raised to the
     # smallest feasible bound when the cap ω <= λ makes g Σ min Γ unreachable.
     g: float = 1.3
-    # m/Hz; initial / allowed range of α in the step model S = α f + β (seed 000: [0.1, 1]).
+    # m/Hz; initial / allowed range of α in the step model S = α f + β (He et al. 2015: [0.1, 1]).
     alpha_range: tuple[float, float] = (0.1, 1.0)
-    # m; initial / allowed range of β (seed 000: [-0.5, 0]).
+    # m; initial / allowed range of β (He et al. 2015: [-0.5, 0]).
     beta_range: tuple[float, float] = (-0.5, 0.0)
-    # 1; initial range of the device gain k (seed 000: [0.1, 6]).
+    # 1; initial range of the device gain k (He et al. 2015: [0.1, 6]).
     k_range: tuple[float, float] = (0.1, 6.0)
-    # dB; initial range of the device offset b (seed 000: [-10, 0]).
+    # dB; initial range of the device offset b (He et al. 2015: [-10, 0]).
     b_range_db: tuple[float, float] = (-10.0, 0.0)
     # Which way [k, b] maps signals. "device": the test device reads φ = k ψ + b for a map-device reading ψ
-    # (the simulator's model; the map is compared with (φ - b) / k). "calibration": seed 000 eq. 5 literally,
+    # (the simulator's model; the map is compared with (φ - b) / k). "calibration": He et al. 2015 eq. 5 literally,
     # φ̃ = k φ + b is compared with the map.
     device_model: Literal["device", "calibration"] = "device"
-    # Particle weight (eq. 22). "distance": seed 000, walked vs. estimated window distance only;
+    # Particle weight (eq. 22). "distance": He et al. 2015, walked vs. estimated window distance only;
     # "distance_signal": also the Gaussian likelihood of the scans given the weighted RPs (ours; makes
     # [k, b] identifiable when the distance test alone is not, see docs/localizers.md).
     particle_weight: Literal["distance", "distance_signal"] = "distance_signal"
@@ -73,9 +74,9 @@ class SlacConfig:
     # 1; probability that a clearly audible AP is still missing from a scan (detection likelihood).
     miss_prob: float = 0.15
     # 1; roughening after resampling: jitter std = roughen * (particle spread) * P^(-1/2) per parameter
-    # (not in seed 000: without it, [k, b] can never be finer than the initial draw).
+    # (not in He et al. 2015: without it, [k, b] can never be finer than the initial draw).
     roughen: float = 0.3
-    # "frequency": δ = Σ (α f_c + β) with [α, β] calibrated (seed 000); "pdr": δ = Σ PDR step lengths
+    # "frequency": δ = Σ (α f_c + β) with [α, β] calibrated (He et al. 2015); "pdr": δ = Σ PDR step lengths
     # (α, β not calibrated; also the fallback, named in the result, when a walk has no step frequencies).
     step_source: Literal["frequency", "pdr"] = "frequency"
     # What to do with a walk that has no step events: "error" (InputError) or "fingerprint_only" (no
@@ -84,11 +85,11 @@ class SlacConfig:
     # What replaces a missing σ (T < 2 readings, or a map without std): "median" (median σ of the map,
     # 0 when it has none; named in the result), "zero", or "error" (InputError when the map has no std).
     missing_std: Literal["median", "zero", "error"] = "median"
-    # After ξ <= η sqrt(Var δ): continue with P = 1 and fixed [k, b, α, β] (seed 000). False: never.
+    # After ξ <= η sqrt(Var δ): continue with P = 1 and fixed [k, b, α, β] (He et al. 2015). False: never.
     converge: bool = True
     # scans; the convergence test runs only once at least this many scans of the walk were seen (ours;
     # with fewer, the particles collapse on little evidence and the test passes too early: measured on the
-    # synthetic venue, k stopped at 1.0-1.1 of 1.25 with 7). 0 = the window size M (seed 000).
+    # synthetic venue, k stopped at 1.0-1.1 of 1.25 with 7). 0 = the window size M (He et al. 2015).
     min_scans_to_converge: int = 30
     # 1; projected-gradient iterations of the joint optimisation per window (warm-started).
     solver_iters: int = 60
@@ -128,14 +129,14 @@ class SlacConfig:
 
 @dataclass(frozen=True)
 class BayesConfig:
-    """Naive Bayes with a Gaussian kernel per AP (seed 002 eq. 1-5)."""
+    """Naive Bayes with a Gaussian kernel per AP (Becker et al. 2015 eq. 1-5)."""
 
-    # dB; kernel bandwidth σ of eq. 4 (seed 002 gives none; ours). The per-RP kernel density of eq. 3 is
+    # dB; kernel bandwidth σ of eq. 4 (Becker et al. 2015 gives none; ours). The per-RP kernel density of eq. 3 is
     # taken as N(ψ̄, σ² + σ_q²) with σ_q the RP's std when the map has it.
     kernel_sigma_db: float = 4.0
-    # dBm; a reading missing on one side counts as this value (METHOD.md §3's -110).
+    # dBm; a reading missing on one side counts as this value (Gu et al. 2017: -110).
     fill_dbm: float = -110.0
-    # 1; position interpolated from the K most probable RPs (eq. 5; seed 002: 3).
+    # 1; position interpolated from the K most probable RPs (eq. 5; Becker et al. 2015: 3).
     k: int = 3
     # "cells" or "nodes": which view of a radio map the RPs are.
     reference: Literal["cells", "nodes"] = "cells"
@@ -148,13 +149,13 @@ class BayesConfig:
 
 @dataclass(frozen=True)
 class SsdConfig:
-    """Signal-strength-difference fingerprints (seed 000's online calibration baseline [26]).
+    """Signal-strength-difference fingerprints (Hossain et al. 2013, a baseline of He et al. 2015).
 
     The mean over AP pairs of the squared difference of pairwise differences equals twice the variance of
     the per-AP residual φ - ψ over the shared APs, so a constant offset b cancels exactly.
     """
 
-    # 1; K nearest RPs by SSD distance, mean position (seed 000's FL uses 15).
+    # 1; K nearest RPs by SSD distance, mean position (He et al. 2015's FL uses 15).
     k: int = 15
     # 1; RPs sharing fewer detected APs with the scan are never neighbours (>= 2: one pair).
     min_shared_aps: int = 3
@@ -174,7 +175,7 @@ class SsdConfig:
 
 @dataclass(frozen=True)
 class PflConfig:
-    """PFL: particle filter fusing PDR steps with fingerprint fixes (seed 000's baseline; seed 004's
+    """PFL: particle filter fusing PDR steps with fingerprint fixes (He et al. 2015's baseline; Chen et al. 2018's
     particle corrections of step length and heading)."""
 
     # 1; particles.
@@ -183,13 +184,13 @@ class PflConfig:
     init_sd_m: float = 5.0
     # m; σ of the fingerprint fix (kNN position) in the measurement likelihood.
     fix_sd_m: float = 6.0
-    # 1; K of the kNN fix (seed 000's FL: 15).
+    # 1; K of the kNN fix (He et al. 2015's FL: 15).
     knn_k: int = 15
-    # 1; σ of the per-particle step-length scale around 1 (seed 004: step length bias per particle).
+    # 1; σ of the per-particle step-length scale around 1 (Chen et al. 2018: step length bias per particle).
     step_scale_sd: float = 0.1
     # 1; σ of the per-step random step-length noise (relative).
     step_noise: float = 0.05
-    # rad; σ of the per-step heading noise added to the particles' heading offset (seed 004: heading bias).
+    # rad; σ of the per-step heading noise added to the particles' heading offset (Chen et al. 2018: heading bias).
     heading_noise_rad: float = 0.03
     # "uniform": the walk frame's rotation into the map frame is unknown (uniform in [0, 2π));
     # "zero": the walk frame is the map frame's orientation.
@@ -215,7 +216,7 @@ class PflConfig:
 
 @dataclass(frozen=True)
 class SmoothingConfig:
-    """Kalman post-filter of a localizer's track using PDR displacements (seed 003 §C)."""
+    """Kalman post-filter of a localizer's track using PDR displacements (subway-station paper §III.C)."""
 
     # m; σ of a localizer position (measurement noise R = σ²).
     measurement_sd_m: float = 4.0
@@ -227,7 +228,7 @@ class SmoothingConfig:
     # scans; the rotation of the walk's PDR frame into the map frame is the least-squares angle between
     # PDR and localizer displacements over the last this many scans (causal).
     rotation_window_scans: int = 15
-    # "filter": causal Kalman filter (seed 003); "rts": plus a Rauch-Tung-Striebel backward pass (offline).
+    # "filter": causal Kalman filter (subway-station paper); "rts": plus a Rauch-Tung-Striebel backward pass (offline).
     mode: Literal["filter", "rts"] = "filter"
 
     def validate(self) -> None:

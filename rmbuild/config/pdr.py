@@ -2,8 +2,8 @@
 
 The readers for Microsoft ILC 2.0 traces (``[pdr.msft_ilc]``) and IPIN / GetSensorData logfiles
 (``[pdr.ipin]``) turn raw phone IMU signals into per-step poses with the settings at the top level.
-Numbers marked "seed 00x" are the papers' defaults (METHOD.md §9); the rest were measured on the
-``msft-ilc20`` traces (docs/formats-real.md).
+Numbers credited to a paper (author and year; docs/references.md) are that paper's defaults; the rest were
+measured on the ``msft-ilc20`` traces (docs/formats-real.md).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Literal
 @dataclass(frozen=True)
 class MsftIlcConfig:
     # s; a TYPE_WIFI row whose last-seen time is older than its scan time by more than this is a stale
-    # cache entry and is dropped (FINDINGS: 3 s drops 55-60 % of the rows).
+    # cache entry and is dropped (on MS ILC 2.0 traces 3 s drops 55-60 % of the rows).
     max_wifi_age_s: float = 3.0
     # a trace without any (fresh) Wi-Fi row is an input error (false: keep the walk, Wi-Fi-less).
     require_wifi: bool = True
@@ -57,21 +57,21 @@ class IpinConfig:
 @dataclass(frozen=True)
 class PdrConfig:
     # --- step detection on the acceleration magnitude ---
-    # "peak_valley": seed 003, a peak followed by a valley, deeper than pv_min_swing_mps2, >= 250 ms apart;
-    # "pan_tompkins": seed 002, derivative (eq. 6) + squaring (eq. 7), peaks above pt_threshold with a
+    # "peak_valley": subway-station paper, a peak followed by a valley, deeper than pv_min_swing_mps2, >= 250 ms apart;
+    # "pan_tompkins": Becker et al. 2015, derivative (eq. 6) + squaring (eq. 7), peaks above pt_threshold with a
     # 300 ms pause. The default was chosen by step-count accuracy (docs/formats-real.md).
     step_detector: Literal["peak_valley", "pan_tompkins"] = "peak_valley"
     # Hz; the magnitude is resampled to this uniform rate before detection (phone timestamps jitter).
     sample_hz: float = 50.0
     # Hz; low-pass (2nd-order Butterworth, zero phase) cut-off applied to the magnitude. 0 = none.
     lowpass_hz: float = 2.5
-    # s; seed 003: minimum time between a peak and its valley (and between two steps).
+    # s; subway-station paper: minimum time between a peak and its valley (and between two steps).
     pv_min_interval_s: float = 0.25
-    # m/s²; seed 003: minimum peak-to-valley swing of one step ("threshold from offline training").
+    # m/s²; subway-station paper: minimum peak-to-valley swing of one step ("threshold from offline training").
     pv_min_swing_mps2: float = 2.5
-    # (m/s²)²-ish; seed 002: threshold on the squared derivative signal (1 + y)² - 1 for a peak.
+    # (m/s²)²-ish; Becker et al. 2015: threshold on the squared derivative signal (1 + y)² - 1 for a peak.
     pt_threshold: float = 2.0
-    # s; seed 002: detection pause after a step.
+    # s; Becker et al. 2015: detection pause after a step.
     pt_refractory_s: float = 0.3
     # s; a gap between steps longer than this counts as standing: the step frequency after it is
     # unknown (the walk's median is used for the step length model).
@@ -87,14 +87,14 @@ class PdrConfig:
     yaw_sigma_by_accuracy_rad: tuple[float, float, float, float] = (0.6, 0.45, 0.3, 0.15)
 
     # --- step length ---
-    # "fixed": step_length_m; "frequency": S = freq_alpha * f + freq_beta (seed 000);
+    # "fixed": step_length_m; "frequency": S = freq_alpha * f + freq_beta (He et al. 2015);
     # "weinberg": S = weinberg_k * (a_max - a_min)^(1/4) over the step's magnitude samples.
     # Default chosen by waypoint error on ILC F1 and F4 (docs/formats-real.md).
     step_length_model: Literal["weinberg", "fixed", "frequency"] = "weinberg"
     # m; fixed step length (also the fallback of "weinberg"). Calibrated on ILC site1/F1 with the default
     # detector: 0.72 m (site2/F4: 0.73 m).
     step_length_m: float = 0.72
-    # m·s; m; seed 000's linear model (SLAC searches alpha in [0.1, 1], beta in [-0.5, 0]).
+    # m·s; m; He et al. 2015's linear model (SLAC searches alpha in [0.1, 1], beta in [-0.5, 0]).
     freq_alpha: float = 0.3
     freq_beta: float = 0.1
     # m/(m/s²)^(1/4); Weinberg's constant for a handheld phone, on the low-passed magnitude (calibrated on

@@ -1,4 +1,4 @@
-"""Config of `rmbuild export-map` (METHOD.md §7; seed 000 eq. 1-3, seed 003)."""
+"""Config of `rmbuild export-map` (docs/method.md; He et al. 2015 eq. 1-3, subway-station paper)."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ class FillConfig:
 
 @dataclass(frozen=True)
 class MapConfig:
-    # m; grid cell edge (seed 003: 1 m, SLAC's survey: 5 m). Must be > 0.
+    # m; grid cell edge (subway-station paper: 1 m, SLAC's survey: 5 m). Must be > 0.
     cell_size_m: float = 2.0
     # 1; minimum readings T of an AP in a cell for its statistics to be kept (T_min; fewer -> not detected).
     min_count: int = 1

@@ -212,7 +212,7 @@ class WalkersConfig:
     # steps; range of the length of a short walk.
     short_walk_steps: tuple[float, float] = (50.0, 150.0)
     # "random": short walks head for random corridor/hall places; "end_to_end": along the longest
-    # x corridor from one end to the other (seed 001's straight-walk experiment).
+    # x corridor from one end to the other (Gu et al. 2017's straight-walk experiment).
     short_walk_route: Literal["random", "end_to_end"] = "random"
     # count; walks (the last ones) with role "test", held out for evaluation.
     n_test_walks: int = 2
@@ -239,7 +239,7 @@ class WalkersConfig:
     # s; range of a pause's duration.
     pause_s: tuple[float, float] = (3.0, 20.0)
     # "route": the first pose faces along the first step; "random": the walker starts facing a random
-    # direction and turns onto the route on the first step (seed 001's random initial headings).
+    # direction and turns onto the route on the first step (Gu et al. 2017's random initial headings).
     start_facing: Literal["route", "random"] = "route"
 
     def validate(self) -> None:
@@ -342,7 +342,7 @@ class MagnetometerConfig:
 class DevicesConfig:
     # count; phones used for the map walks.
     n_devices: int = 4
-    # 1; sigma of a map device's RSS gain k around 1 (device model phi~ = k phi + b, seed 000).
+    # 1; sigma of a map device's RSS gain k around 1 (device model phi~ = k phi + b, He et al. 2015).
     k_sd: float = 0.05
     # dB; sigma of a map device's RSS offset b around 0.
     b_sd_db: float = 2.0
@@ -394,7 +394,7 @@ PRESETS = ("tiny", "default", "large", "corridor12")
 def preset_config(name: str, seed: int) -> SimulateConfig:
     """The named preset with ``seed``: "tiny" (tests, ~600 steps), "default" (~10 walks, ~5,000 steps),
     "large" (~50,000 steps, benchmarks), "corridor12" (12 straight-ish walks along one long corridor,
-    random initial headings: seed 001's heading-alignment experiment). Raises ValueError for other names."""
+    random initial headings: Gu et al. 2017's heading-alignment experiment). Raises ValueError for other names."""
     base = SimulateConfig(seed=seed)
     r = dataclasses.replace
     if name == "default":

@@ -91,7 +91,7 @@ def heading_alignment_error_deg(
 
     ``poses`` and ``truth`` have the same rows (walk_id, x_m, y_m). After the single global rotation
     ``world_R`` (if given), each walk's estimated trajectory is fitted rigidly onto its true one; the
-    fitted rotation angle is how far that walk's frame is turned against truth (seed 001's 12-walk figure).
+    fitted rotation angle is how far that walk's frame is turned against truth (Gu et al. 2017's 12-walk figure).
     Walks with fewer than 2 distinct positions are skipped.
     """
     if truth is None or len(truth) != len(poses):
@@ -115,7 +115,7 @@ def heading_alignment_error_deg(
 
 
 def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_walks=None) -> dict:
-    """The METRICS block of ``reports/optimize.json`` for one set of poses (issue 3).
+    """The METRICS block of ``reports/optimize.json`` for one set of poses.
 
     ``poses_df``: walk_id, step, t_s, x_m, y_m, heading_rad in ``dataset.poses`` row order (e.g. the raw
     poses, or the optimised ones). ``align``: one SE(2) transform, applied to all walks together, is fitted

@@ -1,4 +1,4 @@
-"""Naive Bayes fingerprinting with a Gaussian kernel per AP (seed 002 eq. 1-5).
+"""Naive Bayes fingerprinting with a Gaussian kernel per AP (Becker et al. 2015 eq. 1-5).
 
 ``P(C|x) ∝ P(C) Π_i P(x_i|C)`` with a uniform prior over RPs C. The kernel density of eq. 3 over an RP's
 recorded readings is taken as one Gaussian ``N(ψ̄, σ_k² + σ_q²)`` (σ_k the kernel bandwidth, σ_q the RP's
@@ -8,7 +8,7 @@ three matrix products::
 
     log P(x|C_q) = −½ Σ_j [(x_j − y_qj)² / v_qj + log(2π v_qj)]
 
-The position is the posterior-weighted mean of the K (seed 002: 3) most probable RPs (eq. 5).
+The position is the posterior-weighted mean of the K (Becker et al. 2015: 3) most probable RPs (eq. 5).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ _BLOCK = 512
 
 
 class NaiveBayesLocalizer:
-    """Gaussian-kernel naive Bayes over the RPs; position from the K most probable (seed 002)."""
+    """Gaussian-kernel naive Bayes over the RPs; position from the K most probable (Becker et al. 2015)."""
 
     name: ClassVar[str] = "nb"
 

@@ -1,13 +1,13 @@
-"""FL / kNN and distance-weighted kNN fingerprint localizers (METHOD.md §8; seed 000, seed 004 eq. 3-4).
+"""FL / kNN and distance-weighted kNN fingerprint localizers (He et al. 2015; Chen et al. 2018 eq. 3-4).
 
-The neighbour search is a blocked float32 matrix product (FINDINGS.md: the fastest batch option measured)
+The neighbour search is a blocked float32 matrix product (the fastest batch option measured; bench/bench_map.py)
 that shortlists ``K + margin`` candidates per query, followed by an exact float64 re-rank of the
 shortlist, so neighbours and distances equal a float64 brute-force search (up to exact ties).
 
 With ``a = rss − fill`` (0 where missing) and ``b`` the detection indicator:
 
 * fill / euclidean: ``d² = ‖a_q − a_r‖² = ‖a_q‖² + ‖a_r‖² − 2 a_q·a_r``
-* fill / rms (seed 001 eq. 9): the same divided by ``M = n_q + n_r − b_q·b_r`` (|union of detected APs|)
+* fill / rms (Gu et al. 2017 eq. 9): the same divided by ``M = n_q + n_r − b_q·b_r`` (|union of detected APs|)
 * exclude: ``d² = Σ_shared (v_q − v_r)² / |shared|``, with ``Σ_shared = (v_q²)·b_rᵀ + b_q·(v_r²)ᵀ −
   2 v_q·v_rᵀ`` and ``|shared| = b_q·b_rᵀ``; RPs sharing fewer than ``min_shared_aps`` APs are never
   neighbours.

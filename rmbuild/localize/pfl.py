@@ -1,9 +1,9 @@
-"""PFL: a particle filter fusing PDR steps with fingerprint fixes (seed 000's baseline PFL; seed 004's
+"""PFL: a particle filter fusing PDR steps with fingerprint fixes (He et al. 2015's baseline PFL; Chen et al. 2018's
 particle corrections of step length and walking direction).
 
 Per test walk, state per particle: position (map frame), the rotation of the walk's PDR frame into the
 map frame, and a step-length scale. Each PDR step moves every particle by ``scale · L · (1 + n)`` along
-``heading + rotation`` (``n`` relative noise; the rotation takes a small random walk, seed 004's heading
+``heading + rotation`` (``n`` relative noise; the rotation takes a small random walk, Chen et al. 2018's heading
 bias). Each Wi-Fi scan weights the particles by a Gaussian of their distance to the scan's kNN fix
 (σ = ``fix_sd_m``); resampling when the effective sample size drops. The estimate is the weighted mean
 after the scan's update (causal). Without step events the walk falls back to the kNN fixes (named
@@ -25,7 +25,7 @@ from rmbuild.localize.slac import sub_config
 
 
 class PflLocalizer:
-    """Particle filter: PDR motion model, kNN fixes as measurements (seed 000 PFL, seed 004)."""
+    """Particle filter: PDR motion model, kNN fixes as measurements (He et al. 2015 PFL, Chen et al. 2018)."""
 
     name: ClassVar[str] = "pfl"
 

@@ -1,4 +1,4 @@
-"""SLAC: simultaneous localization and calibration (seed 000; METHOD.md §8 restates its equations).
+"""SLAC: simultaneous localization and calibration (He et al. 2015; docs/localizers.md).
 
 Per test walk, scans in time order. For each new scan the last ``M`` scans (the window) are localized
 jointly for every particle ``p`` = device model ``[k_p, b_p]``:
@@ -14,7 +14,7 @@ jointly for every particle ``p`` = device model ``[k_p, b_p]``:
   (Σω = 1, 0 ≤ ω ≤ λ) with the signal bound ``Σ_m Σ_q Γω ≤ γ`` and the shared step model ``[α, β]``,
   minimising ``Σ_m B(‖x_m − x_{m−1}‖ − δ_m)`` (Berhu, eq. 17), ``x_m = Σ ω r``, ``δ_m = Σ_c (α f_c + β)``
   over the steps between the two scans. ``γ = g Σ_m c_m`` with ``c_m`` the least signal cost reachable
-  under the cap (seed 000 writes ``g Σ min Γ``, which the cap makes unreachable for g near 1).
+  under the cap (He et al. 2015 writes ``g Σ min Γ``, which the cap makes unreachable for g near 1).
   Solved for all particles at once by projected gradient (exact projection onto the capped simplex by
   its breakpoints) with a feasibility retraction towards the least-signal-cost point for the signal bound;
   ``[α, β]`` by projected gradient on their box. The Berhu loss and the norm get an ``ε`` smoothing at 0.
@@ -81,7 +81,7 @@ def calibrate_query(query: Query, k: float, b: float, device_model: str = "devic
 
 
 def fit_device_model(map_dbm: np.ndarray, device_dbm: np.ndarray) -> tuple[float, float, int]:
-    """Offline linear fit (seed 000 [21]) ``device = k · map + b`` from co-located readings.
+    """Offline linear fit (He et al. 2015, their ref. [21]) ``device = k · map + b`` from co-located readings.
 
     ``map_dbm``, ``device_dbm``: same shape, NaN where either side has no reading. Returns (k, b, n pairs).
     Raises InputError with fewer than 2 pairs or no spread in ``map_dbm``.
@@ -194,7 +194,7 @@ def _steps_between(t_scan: np.ndarray, steps: pd.DataFrame) -> _Steps:
 
 
 class SlacLocalizer:
-    """SLAC (seed 000). ``fit(radio_map)``, then ``predict(query)`` needs ``query.steps`` for each walk.
+    """SLAC (He et al. 2015). ``fit(radio_map)``, then ``predict(query)`` needs ``query.steps`` for each walk.
 
     After ``predict``, :attr:`diagnostics` maps walk id -> :class:`SlacWalkResult`.
     """

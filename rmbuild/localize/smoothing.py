@@ -1,4 +1,4 @@
-"""Kalman post-filter of a localizer's track with PDR displacements (seed 003 §C).
+"""Kalman post-filter of a localizer's track with PDR displacements (subway-station paper §III.C).
 
 Per walk, state = position (map frame). Prediction: ``x_t = x_{t−1} + R(θ) Δ_t`` with ``Δ_t`` the PDR
 displacement (walk frame) between the two scans and ``R(θ)`` the walk frame's rotation into the map frame,

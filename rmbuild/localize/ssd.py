@@ -1,4 +1,4 @@
-"""SSD: signal-strength-difference fingerprints (seed 000's online-calibration baseline, its ref. [26]).
+"""SSD: signal-strength-difference fingerprints (Hossain et al. 2013; a baseline of He et al. 2015).
 
 A fingerprint becomes its pairwise AP differences ``φ_i − φ_j``, which a device offset ``b`` does not
 change. Over the APs S shared by a scan and an RP, with the residual ``e = φ − ψ̄``::

@@ -82,7 +82,7 @@ def integrate_steps(t0_s: float, step_t_s: np.ndarray, length_m: np.ndarray, hea
 
 def integrate_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: np.ndarray,
                          dtheta_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Compose body-frame increments (seed 001 eq. 6-8): x_k = x_{k-1} + dx cos θ_{k-1} - dy sin θ_{k-1},
+    """Compose body-frame increments (Gu et al. 2017 eq. 6-8): x_k = x_{k-1} + dx cos θ_{k-1} - dy sin θ_{k-1},
     y_k likewise, θ_k = θ_{k-1} + dθ. Inputs (k,); returns (k + 1,) arrays starting at (t0, 0, 0, 0)."""
     th = np.r_[0.0, np.cumsum(dtheta_rad)]
     c, s = np.cos(th[:-1]), np.sin(th[:-1])

@@ -1,4 +1,4 @@
-"""Step length models: fixed, linear in step frequency (seed 000: S = alpha f + beta), Weinberg."""
+"""Step length models: fixed, linear in step frequency (He et al. 2015: S = alpha f + beta), Weinberg."""
 
 from __future__ import annotations
 

@@ -1,11 +1,11 @@
-"""Step detection on the acceleration magnitude (METHOD.md §9).
+"""Step detection on the acceleration magnitude (docs/formats-real.md).
 
 Two detectors, both working on a magnitude signal resampled to a uniform rate and low-passed
 (:func:`prepare_magnitude`):
 
-- :func:`detect_steps_peak_valley` — seed 003: a step is a peak followed by a valley whose swing exceeds a
+- :func:`detect_steps_peak_valley` — subway-station paper: a step is a peak followed by a valley whose swing exceeds a
   threshold, consecutive steps at least 250 ms apart (so a peak followed by several valleys counts once);
-- :func:`detect_steps_pan_tompkins` — seed 002: Pan-Tompkins-style derivative (eq. 6, negative values
+- :func:`detect_steps_pan_tompkins` — Becker et al. 2015: Pan-Tompkins-style derivative (eq. 6, negative values
   dropped) and squaring (eq. 7), a step at each local maximum above a threshold, then a 300 ms pause.
 """
 

@@ -1,4 +1,4 @@
-"""Rasterise node positions and their Wi-Fi readings onto a grid (METHOD.md §7; seed 000 eq. 1-3).
+"""Rasterise node positions and their Wi-Fi readings onto a grid (docs/method.md; He et al. 2015 eq. 1-3).
 
 Per cell c and AP j, over the T readings ψ_1..ψ_T of AP j attached to nodes inside c:
 

@@ -1,4 +1,4 @@
-"""How hard is a simulated venue? Raw dead-reckoning drift and the false-pair rate of seed 001's
+"""How hard is a simulated venue? Raw dead-reckoning drift and the false-pair rate of Gu et al. 2017's
 vicinity rule, measured against the truth (for tests, benchmarks and tuning the simulator)."""
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ def raw_walk_errors(data: SimulatedData) -> pd.DataFrame:
 
 @dataclass
 class PairRuleStats:
-    """Outcome of seed 001's pair rule (METHOD.md §3-4) on the scan nodes of a simulated data set."""
+    """Outcome of the pair rule of Gu et al. 2017 (eq. 9 distance under the median-window threshold) on the
+    scan nodes of a simulated data set."""
 
     n_scan_nodes: int
     n_pairs: int  # cross-walk pairs (k, q) with d(k, q) < d_med(k) (ordered: k's rule)
@@ -71,7 +72,7 @@ def scan_fingerprints(data: SimulatedData) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def rss_distance(a: np.ndarray, b: np.ndarray, fill_dbm: float = -110.0) -> np.ndarray:
-    """(n, m) seed 001 RSS distance between rows of a (n, B) and b (m, B) (NaN = missing): fill, then
+    """(n, m) Gu et al. 2017 RSS distance between rows of a (n, B) and b (m, B) (NaN = missing): fill, then
     sqrt(sum of squared differences over the union of detected APs / size of the union)."""
     da, db = ~np.isnan(a), ~np.isnan(b)
     xa = np.where(da, a - fill_dbm, 0.0)
