@@ -11,7 +11,7 @@ from rmbuild.cli.options import common_options, start
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--preset", type=click.Choice(["tiny", "default", "large", "corridor12"]), default="default",
               show_default=True, help="Venue size: tiny (tests, seconds), default (~10 walks, ~5,000 steps), "
-              "large (~50,000 steps, benchmarks), corridor12 (seed 001's 12 corridor walks).")
+              "large (~50,000 steps, benchmarks), corridor12 (12 walks along one corridor, as in Gu et al. 2017).")
 @click.option("--seed", type=int, default=7, show_default=True, help="Random seed; same seed, same files.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="File format of the written tables.")

@@ -1,8 +1,8 @@
-"""Vicinity-pair search (METHOD.md §3-4).
+"""Vicinity-pair search (Gu et al. 2017, §III-B).
 
 Two searches over the fingerprinted nodes ("rows"; row r is fingerprint r, node ``meta.node[r]``):
 
-- :func:`median_window_pairs` — seed 001 as written: node k's threshold is the median RSS distance inside
+- :func:`median_window_pairs` — the paper as written: node k's threshold is the median RSS distance inside
   its own walk's window of L steps; (k, q) is a pair when d(k, q) < d_med(k), for q in any walk except
   same-walk nodes near in time or in walked distance. Blocked all-pairs matrix products, capped per node.
 - :func:`run_matched_candidates` — rmbuild's candidates: consecutive scans are averaged into segments,
@@ -120,7 +120,7 @@ def _dedupe(ri: np.ndarray, rj: np.ndarray, *cols: np.ndarray):
 def median_window_pairs(
     rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None
 ) -> tuple[pd.DataFrame, np.ndarray]:
-    """Seed 001's pair rule over all row pairs; returns (pairs, d_med per row).
+    """The paper's pair rule over all row pairs; returns (pairs, d_med per row).
 
     Row k proposes q when d(k, q) < d_med(k), q allowed (see :func:`_allowed`), at least
     ``min_common_aps`` shared APs; each row keeps its ``max_pairs_per_node`` closest proposals; the

@@ -1,4 +1,4 @@
-"""RSS distance of seed 001 eq. 9 as matrix products (FINDINGS: the GEMM identity).
+"""RSS distance of eq. 9 (Gu et al. 2017) as matrix products.
 
 With ``a = rss - fill`` (0 for a missing AP) and ``b`` the detection indicator, the sum of squared
 differences over the union of two fingerprints' APs is ``‖a_k − a_q‖²`` and the union's size is
