@@ -51,7 +51,7 @@ class RFModel:
     n_near: int = 0
     n_far: int = 0
 
-    def log_lr(self, r: np.ndarray) -> np.ndarray:
+    def log_lr(self, r: np.ndarray | float) -> np.ndarray:
         """ln p(r | near) - ln p(r | far) for RSS distances r (dB)."""
         r = np.asarray(r, dtype=float)
         zn = (r - self.near_mu) / self.near_sigma

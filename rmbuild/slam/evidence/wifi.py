@@ -25,7 +25,7 @@ from rmbuild.slam.evidence.base import EvidenceSource, Links, SolveState, Update
 from rmbuild.slam.factors import anisotropic_factor, anisotropic_noise, vicinity_factor, vicinity_noise
 from rmbuild.slam.pairs import RowMeta, SearchParams, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.problem import WalkSet
-from rmbuild.slam.rfmodel import calibrate
+from rmbuild.slam.rfmodel import RFModel, calibrate
 from rmbuild.slam.rss import RssMatrix
 
 # A same-walk pair is kept when its two nodes lie, by the walk's own dead reckoning, within this distance
@@ -54,12 +54,14 @@ def search_params(cfg: WifiConfig) -> SearchParams:
 @dataclass
 class ScanSimilarity:
     """What kNN placement needs of the fingerprints: the eq. 9 distance matrix, the node of each row, each
-    row's own-walk window median (its similarity threshold) and the shared APs a neighbour needs."""
+    row's own-walk window median (its similarity threshold), the shared APs a neighbour needs and the data
+    set's RF model."""
 
     rss: RssMatrix
     row_node: np.ndarray
     threshold: np.ndarray
     min_common: int
+    rf: RFModel
 
 
 class WifiSource(EvidenceSource):
@@ -103,7 +105,7 @@ class WifiSource(EvidenceSource):
 
     def scan_locator(self) -> ScanSimilarity:
         thr = window_median(self.rss, self.meta, self.cfg.window_steps)
-        return ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps)
+        return ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps, self.rf)
 
     # ------------------------------------------------------------------------------------ solve set-up
     def prepare(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:

@@ -85,12 +85,12 @@ def _grow_from(ref: int, walks: WalkSet, links: Links, rot: RotationPriors, sim,
     """One growth (links, scan rounds, merges) from the reference walk ``ref``."""
     log: list[dict] = []
     st = GrowState.empty(walks.n_walks, ref, rot.known)
-    st = grow(st, PairEvidence(walks, links.node_k, links.node_q, edges, cfg), walks, rot, cfg, cnt, log, ties)
+    st = grow(st, PairEvidence(walks, links.node_k, links.node_q, edges, cfg), walks, rot, cfg, cnt, log)
     lk_all, lq_all = [], []
 
     def scan_growth(st: GrowState) -> GrowState:
         ev = ScanEvidence(walks, sim, cfg)
-        st = grow(ev.restart(st, rot), ev, walks, rot, cfg, cnt, log, ties)
+        st = grow(ev.restart(st, rot), ev, walks, rot, cfg, cnt, log)
         lk, lq = ev.links()
         lk_all.append(lk)
         lq_all.append(lq)
@@ -107,7 +107,7 @@ def _grow_from(ref: int, walks: WalkSet, links: Links, rot: RotationPriors, sim,
     st = orient_components(st, rot)
     scan_links = (np.concatenate(lk_all), np.concatenate(lq_all)) if lk_all else None
     return Placement(st.T, st.comp, ref, st.heading_used & rot.known, st.method, links=scan_links,
-                     gate_m=cfg.gate_m, log=log)
+                     gate_m=cfg.gate_m, log=log, round_placed=st.rnd, n_inliers=st.n_inl, shared_m=st.shared)
 
 
 def origin_placement(walks: WalkSet, links: Links, reference: int | None) -> Placement:

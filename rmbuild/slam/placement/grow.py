@@ -20,7 +20,7 @@ import numpy as np
 
 from rmbuild import geometry
 from rmbuild.config.optimize import PlacementConfig
-from rmbuild.slam.evidence.base import RotationPriors, Ties
+from rmbuild.slam.evidence.base import RotationPriors
 from rmbuild.slam.placement.edges import RANSAC_SEED
 from rmbuild.slam.placement.fits import accept_pairs_fit, accept_scans_fit, fit_to_pairs, fit_to_scans
 from rmbuild.slam.placement.model import GrowState, WalkFit
@@ -33,8 +33,6 @@ MAX_ROUNDS = 100
 KNN_K = 3
 # rows per block of the kNN distance products
 KNN_BLOCK_ROWS = 2048
-# m; a position tie places a walk (when the evidence places nothing) only with a sigma up to this
-TIE_PLACE_MAX_SIGMA_M = 10.0
 # sigmas; a placed walk whose refined rotation is further than this from its compass rotation has an
 # unreliable compass: its heading priors are dropped
 HEADING_OUTLIER_SIGMAS = 4.0
@@ -61,25 +59,6 @@ def leftovers(st: GrowState, rot: RotationPriors, c_id: int) -> None:
         c_id += 1
         if rot.known[ref] and rot.known[w]:
             st.T[w, 2] = geometry.wrap(rot.theta[w] - rot.theta[ref])
-
-
-def tie_placements(st: GrowState, walks: WalkSet, ties: Ties, placed: np.ndarray, free: np.ndarray,
-                   prior: np.ndarray) -> list[tuple[int, WalkFit]]:
-    """Free walks tied (sigma <= TIE_PLACE_MAX_SIGMA_M) to a placed walk, placed so that the tied nodes
-    coincide, with their compass rotation (walks without one are not placed this way)."""
-    out: list[tuple[int, WalkFit]] = []
-    wo = walks.walk_of
-    for i in np.argsort(ties.sigma_m, kind="stable"):
-        if ties.sigma_m[i] > TIE_PLACE_MAX_SIGMA_M:
-            break
-        a, b = int(ties.node_a[i]), int(ties.node_b[i])
-        for u_node, v_node in ((a, b), (b, a)):
-            u, v = int(wo[u_node]), int(wo[v_node])
-            if placed[u] and free[v] and np.isfinite(prior[v]) and v not in {w for w, _ in out}:
-                th = float(prior[v])
-                t = walks.world_xy(st.T, np.array([u_node]))[0] - geometry.rot(th) @ walks.raw[v_node, :2]
-                out.append((v, WalkFit(np.array([t[0], t[1], th]), 0, 0, 0.0, 1, "continuity", np.zeros(0, bool))))
-    return out
 
 
 def _distrust_outliers(st: GrowState, placed: np.ndarray, prior: np.ndarray, sig: np.ndarray) -> None:
@@ -132,9 +111,8 @@ class GrowthEvidence(ABC):
 
 
 def grow(st: GrowState, ev: GrowthEvidence, walks: WalkSet, rot: RotationPriors, cfg: PlacementConfig,
-         cand_count: np.ndarray, log: list, ties: Ties | None = None) -> GrowState:
-    """The placement loop: components grown round by round from seeds, then the walks left over. A round
-    in which the evidence places nothing falls back on the position ties to placed walks."""
+         cand_count: np.ndarray, log: list) -> GrowState:
+    """The placement loop: components grown round by round from seeds, then the walks left over."""
     wlen = window_lengths(walks, cfg)
     seed: int | None = st.reference
     c_id = 0
@@ -144,8 +122,6 @@ def grow(st: GrowState, ev: GrowthEvidence, walks: WalkSet, rot: RotationPriors,
         for r in range(1, MAX_ROUNDS + 1):
             free = walks.keep & (st.comp < 0)
             new = ev.round(st, placed, free, prior, c_id, r, log)
-            if not new and ties is not None:
-                new = tie_placements(st, walks, ties, placed, free, prior)
             if not new:
                 break
             for w, f in new:
@@ -270,10 +246,9 @@ class ScanEvidence(GrowthEvidence):
         self._new_walks.append(w)
         if f.method == "se2" and np.isfinite(prior[w]):
             st.heading_used[w] = False
-        if w in self._pending:  # (a walk placed by a tie brings no scan links)
-            a, b = self._pending[w]
-            self.link_k.append(a)
-            self.link_q.append(b)
+        a, b = self._pending[w]
+        self.link_k.append(a)
+        self.link_q.append(b)
 
     def refine_links(self) -> tuple[np.ndarray, np.ndarray]:
         return self.links()

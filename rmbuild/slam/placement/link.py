@@ -42,9 +42,11 @@ def link_components(st: GrowState, walks: WalkSet, ties: Ties, links: Links, rot
         move, stay = (ca, cb) if _moves(ca, cb, st, size) else (cb, ca)
         if move == ca:
             delta = -delta
+        tie_delta = delta.copy()
         delta, verdict = _vote(st, walks, links, move, stay, delta, sig, cfg)
         log.append({"phase": "continuity", "component": move, "onto": stay, "sigma_m": sig,
-                    "accepted": verdict != "contradicted", "verdict": verdict})
+                    "accepted": verdict != "contradicted", "verdict": verdict, "node_a": a, "node_b": b,
+                    "walks": int((st.comp == move).sum()), "tie": tie_delta.tolist(), "T": delta.tolist()})
         if verdict == "contradicted":
             continue
         members = st.comp == move
@@ -97,3 +99,4 @@ def _vote(st: GrowState, walks: WalkSet, links: Links, move: int, stay: int, del
     if votes[best] >= cfg.min_inliers and not near_tie[best]:
         return delta, "contradicted"
     return delta, "tie"
+

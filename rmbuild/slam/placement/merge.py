@@ -124,3 +124,4 @@ def orient_components(st: GrowState, rot: RotationPriors) -> GrowState:
         off = component_compass_offset(st.T, hm, rot, ref)
         st.T[members] = geometry.compose(np.array([0.0, 0.0, off]), st.T[members])
     return st
+

@@ -66,7 +66,9 @@ class Placement:
     Anchors set ``frame_rotation`` (rad, applied to the reference frame), ``gauge_full`` /
     ``gauge_rotation_only`` (component roots that need a full / rotation-only gauge prior) and
     ``anchored``; without anchors each component's root gets a full gauge prior.
-    ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics).
+    ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
+    ``round_placed`` / ``n_inliers`` / ``shared_m`` (n_walks,): the growth round a walk was placed in (-1
+    never, 0 for seeds), its inlier scans and shared path (m) then.
     """
 
     world_T_walk: np.ndarray
@@ -83,6 +85,9 @@ class Placement:
     n_anchors: int = 0
     edge_fits: tuple[int, int] = (0, 0)
     log: list[dict] = field(default_factory=list)
+    round_placed: np.ndarray | None = None
+    n_inliers: np.ndarray | None = None
+    shared_m: np.ndarray | None = None
 
     @property
     def linked(self) -> np.ndarray:
