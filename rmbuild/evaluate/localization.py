@@ -140,6 +140,17 @@ def reference_positions(dataset: Dataset) -> tuple[np.ndarray, str | None]:
     return ref, src
 
 
+def query_reference_xy(dataset: Dataset, query: Query) -> np.ndarray:
+    """float64 (n_queries, 2) reference position of every query scan: its walk's reference track (truth
+    poses, else fixes) interpolated at the scan time; NaN outside the track or without one."""
+    tracks, _ = _reference_tracks(dataset)
+    out = np.full((len(query), 2), np.nan)
+    for wid, rows in query.walks():
+        if wid in tracks:
+            out[rows] = _interp_track(*tracks[wid], query.t_s[rows])
+    return out
+
+
 def _apply(r: np.ndarray, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return xy @ r.T + t
 
@@ -345,11 +356,7 @@ def evaluate(
     query = Query.from_dataset(dataset, test, bssids, unit=cfg.query)
     if len(query) == 0:
         raise InputError("the test walks have no Wi-Fi scans")
-    tracks, _ = _reference_tracks(dataset)
-    q_ref = np.full((len(query), 2), np.nan)
-    for wid, rows in query.walks():
-        if wid in tracks:
-            q_ref[rows] = _interp_track(*tracks[wid], query.t_s[rows])
+    q_ref = query_reference_xy(dataset, query)
     q_node = query.node
     q_built = np.where((q_node >= 0)[:, None], built_al[np.maximum(q_node, 0)], np.nan)
 
@@ -364,10 +371,10 @@ def evaluate(
             p = np.asarray(loc.predict(query), dtype=float)
             preds[mname][lname] = p
             if src is not None:
-                e = np.hypot(*(p - q_ref).T)
-                errors[mname][lname] = e
+                err = np.hypot(*(p - q_ref).T)
+                errors[mname][lname] = err
                 # localizer-specific figures (e.g. SLAC's calibrated k, b, alpha, beta) beside the errors
-                stats[mname][lname] = {**error_stats(e), **loc.summary()}
+                stats[mname][lname] = {**error_stats(err), **loc.summary()}
             if mname == "built":
                 consistency.setdefault("built", {})[lname] = error_stats(np.hypot(*(p - q_built).T))
     if src is None:
