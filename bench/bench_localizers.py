@@ -271,7 +271,7 @@ def ipin_case() -> dict:
         first.setdefault(w.split("_repetition")[0], w)
     a5_map = sorted(first.values())
     same = run_case(*surveyed_case(ds, fp.bssids, a5_map, [w for w in a5 if w not in a5_map]),
-                    names=("knn", "nb", "mll", "slac", "smartloc"))
+                    names=("knn", "nb", "ssd", "hist", "hist_dir", "mll", "pfl", "slac", "smartloc", "smartloc_static"))
     out = {"map": f"{len(a5)} Galaxy A5 walks", "tests": f"{len(s7)} Galaxy S7 walks", "n_scans": len(q),
            "n_rps": rm.n_cells, "pdr": pdr, "offline_fits": {r: f.to_json() for r, f in fits.items()},
            "localizers": res, "same_device_reference": {
