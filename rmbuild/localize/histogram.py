@@ -79,23 +79,25 @@ class HistogramLocalizer:
         reach = self._reach(layer.bin_db)
         self._bin0 = int(layer.bin.min()) - reach
         self._n_bins = int(layer.bin.max()) - self._bin0 + 1 + reach
-        tot = np.zeros((n_rp, n_ap))
-        np.add.at(tot, (rp, layer.ap), layer.count)
-        occ = tot / np.maximum(tot.max(axis=1, keepdims=True), 1.0)  # R: probability of occurrence
-        rp, ap, b, cnt = self._spread(rp, layer.ap.astype(np.int64), layer.bin.astype(np.int64),
-                                      layer.count.astype(float), layer.bin_db)
-        cols = ap * self._n_bins + (b - self._bin0)
-        shape = (n_rp, n_ap * self._n_bins)
-        pr = sparse.csr_matrix((cnt / tot[rp, ap], (rp, cols)), shape=shape)  # sums duplicates
-        r_pr, c_pr = pr.nonzero()
-        v_pr = np.asarray(pr[r_pr, c_pr]).ravel()
+        # per (RP, AP): readings T and R = T / (the RP's largest T) — sparse, one value per entry
+        _, pair = np.unique(rp * n_ap + layer.ap, return_inverse=True)
+        pair = pair.reshape(-1)
+        tot = np.bincount(pair, weights=layer.count)
+        rp_max = np.zeros(n_rp)
+        np.maximum.at(rp_max, rp, tot[pair])
+        w = layer.count / tot[pair]  # Pr of each entry's bin
         if self.cfg.scoring == "mark":
-            ap_pr = c_pr // self._n_bins
-            self._v = sparse.csr_matrix((v_pr * occ[r_pr, ap_pr], (r_pr, c_pr)), shape=shape)  # Pr · R
-            self._o = sparse.csr_matrix((np.ones(len(v_pr)), (r_pr, c_pr)), shape=shape)
+            w = w * tot[pair] / rp_max[rp]  # Pr · R
+        rp, ap, b, w = self._spread(rp, layer.ap.astype(np.int64), layer.bin.astype(np.int64), w, layer.bin_db)
+        shape = (n_rp, n_ap * self._n_bins)
+        v = sparse.csr_matrix((w, (rp, ap * self._n_bins + (b - self._bin0))), shape=shape).tocoo()
+        v.sum_duplicates()  # spread neighbours of one (RP, AP) land in the same bins: add them
+        if self.cfg.scoring == "mark":
+            self._v = v.tocsr()
+            self._o = sparse.csr_matrix((np.ones(v.nnz), (v.row, v.col)), shape=shape)
         else:  # log((Pr + ε) / ε): zero where the histogram is empty, so the product stays sparse
             eps = self.cfg.floor_prob
-            self._v = sparse.csr_matrix((np.log((v_pr + eps) / eps), (r_pr, c_pr)), shape=shape)
+            self._v = sparse.csr_matrix((np.log((v.data + eps) / eps), (v.row, v.col)), shape=shape)
         self._xy = radio_map.cell_xy[rp_u[:, 0]]
         self.rp_sector = rp_u[:, 1]
         self.bin_db = layer.bin_db
@@ -108,8 +110,8 @@ class HistogramLocalizer:
         return int(np.ceil(SMOOTH_REACH_SIGMAS * self.cfg.smooth_db / bin_db)) if self.cfg.smooth_db > 0 else 0
 
     def _spread(self, rp, ap, b, cnt, bin_db):
-        """Histogram entries with every reading spread over the neighbouring bins by a Gaussian of σ =
-        ``smooth_db`` cut at ±:data:`SMOOTH_REACH_SIGMAS` σ (each reading's mass stays 1)."""
+        """Histogram entries (``cnt`` per entry) with each entry's mass spread over the neighbouring bins by
+        a Gaussian of σ = ``smooth_db`` cut at ±:data:`SMOOTH_REACH_SIGMAS` σ (its total stays the same)."""
         reach = self._reach(bin_db)
         if reach == 0:
             return rp, ap, b, cnt
