@@ -108,30 +108,33 @@ def standing_means(sd, cfg, spots_xy: np.ndarray, device, n_scans: int = 20, see
     return means[0], means[1], (floors[0], floors[1])
 
 
-def standing_fit(sd, cfg, spots_xy: np.ndarray, device, seed: int = 1):
-    """(DeviceFit, OLS (k, b) on the same pairs) from :func:`standing_means`."""
-    from rmbuild.localize.calibration import fit_device_model
+def standing_fit(sd, cfg, spots_xy: np.ndarray, device, seed: int = 1, margins=(None,)):
+    """(DeviceFit per margin (None = the default), OLS (k, b) on the same pairs) from :func:`standing_means`."""
+    from rmbuild.localize.calibration import FLOOR_MARGIN_DB, fit_device_model
 
     x, y, floors = standing_means(sd, cfg, spots_xy, device, seed=seed)
     ok = np.isfinite(x) & np.isfinite(y)
     ols = np.polyfit(x[ok], y[ok], 1)
-    return fit_device_model(x, y, floors), (float(ols[0]), float(ols[1]))
+    fits = [fit_device_model(x, y, floors, FLOOR_MARGIN_DB if m is None else m) for m in margins]
+    return (fits[0] if len(fits) == 1 else fits), (float(ols[0]), float(ols[1]))
 
 
 def fit_study(draws: int = 8) -> dict:
-    """The offline fit's bias on the simulator: OLS vs :func:`fit_device_model` over ``draws`` random draws
-    of 60 and of 240 standing spots (the `default` venue, device 1.25 / -6 dB)."""
+    """The offline fit's bias on the simulator: OLS vs :func:`fit_device_model` (floor margins 10 and 15 dB)
+    over ``draws`` random draws of 60 and of 240 standing spots (the `default` venue, device 1.25 / -6 dB)."""
     sd, cfg, _, _, qxy = _scenario("default", DEVICE, 4, 2.0)
     inside = np.flatnonzero(np.isfinite(qxy).all(axis=1))
     out: dict = {"device": {"k": DEVICE[0], "b": DEVICE[1]}, "draws": draws}
     for n_spots in (60, 240):
-        ks: dict[str, list] = {"ols": [], "fit_device_model": []}
+        ks: dict[str, list] = {"ols": [], "fit_device_model (margin 10 dB)": [],
+                               "fit_device_model (margin 15 dB, default)": []}
         for d in range(draws):
             rng = np.random.default_rng(100 + d)
             spots = qxy[rng.choice(inside, n_spots, replace=n_spots > len(inside))] + rng.normal(0, 0.5, (n_spots, 2))
-            fit, ols = standing_fit(sd, cfg, spots, DEVICE, seed=200 + d)
+            (f10, f15), ols = standing_fit(sd, cfg, spots, DEVICE, seed=200 + d, margins=(10.0, 15.0))
             ks["ols"].append(ols)
-            ks["fit_device_model"].append((fit.k, fit.b))
+            ks["fit_device_model (margin 10 dB)"].append((f10.k, f10.b))
+            ks["fit_device_model (margin 15 dB, default)"].append((f15.k, f15.b))
         out[f"{n_spots}_spots"] = {m: {"k_mean": round(float(np.mean([v[0] for v in r])), 3),
                                        "k_sd": round(float(np.std([v[0] for v in r])), 3),
                                        "b_mean": round(float(np.mean([v[1] for v in r])), 2),

@@ -225,7 +225,8 @@ class EvalResult:
 
     def table(self) -> str:
         """A short fixed-width text table: one row per map and localizer."""
-        head = f"{'map':<9}{'localizer':<10}{'mean':>7}{'median':>8}{'p90':>7}{'rmse':>7}{'max':>7}" \
+        w = max([len("localizer")] + [len(loc) for d in self.stats.values() for loc in d]) + 1
+        head = f"{'map':<9}{'localizer':<{w}}{'mean':>7}{'median':>8}{'p90':>7}{'rmse':>7}{'max':>7}" \
                f"{'<5m':>6}{'<10m':>6}{'n':>6}"
         lines = [head, "-" * len(head)]
 
@@ -234,7 +235,7 @@ class EvalResult:
 
         for m in MAP_NAMES:
             for loc, s in self.stats.get(m, {}).items():
-                lines.append(f"{m:<9}{loc:<10}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
+                lines.append(f"{m:<9}{loc:<{w}}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
                              f"{f(s['rmse'], 7)}{f(s['max'], 7)}{f(s['p_lt_5m'], 6)}{f(s['p_lt_10m'], 6)}"
                              f"{s['n']:>6d}")
         lines.append(f"gauge: {self.gauge}; test walks: {len(self.test_walks)} ({self.split_rule}); "

@@ -5,16 +5,16 @@ co-located readings, then every scan mapped back, ``ψ = (φ − b) / k``, befor
 
 **Why a plain least-squares fit is biased, and what :func:`fit_device_model` does instead.** Co-located
 per-(spot, AP) means are noisy on *both* sides (each device's session offset per AP, a few dB, does not
-average out over repeated scans), and the weaker device's means near its detection floor are means of
-the readings it happened to detect. Ordinary least squares of device on map then (a) shrinks ``k``
-towards 0 by the map side's noise (regression dilution) and (b) flattens it further because the device's
-low end is truncated upwards. On the synthetic venue a (1.25, −6 dB) device came out as k = 0.68 ± 0.03,
-b = −42 ± 2 dB from 60 standing spots (docs/localizers.md). The fit here is a Deming (errors-in-variables)
-regression with error-variance ratio ``k²`` (both devices see the same radio noise, the device scaled by
-k), iterated, on the pairs whose estimated true level lies at least :data:`FLOOR_MARGIN_DB` above both
-devices' detection floors (selected on the fit's latent value, not on either noisy side, so the
-selection does not tilt the fit): 1.22 ± 0.08, −8 ± 5 dB from 60 spots; 1.235 ± 0.05, −6.6 ± 3 dB
-from 240 (six draws each).
+average out over repeated scans), and the weaker device's means near its detection floor are means of the
+readings it happened to detect. Ordinary least squares of device on map then (a) shrinks ``k`` towards 0 by
+the map side's noise (regression dilution) and (b) flattens it further because the device's low end is
+truncated upwards. On the synthetic venue a (1.25, −6 dB) device came out as k = 0.68 ± 0.03, b = −42 ± 2 dB
+from 60 standing spots (bench/bench_localizers.py, eight draws; docs/localizers.md). The fit here is a
+Deming (errors-in-variables) regression with error-variance ratio ``k²`` (both devices see the same radio
+noise, the device scaled by k), iterated, on the pairs whose estimated true level lies at least
+:data:`FLOOR_MARGIN_DB` above both devices' detection floors (selected on the fit's latent value, not on
+either noisy side, so the selection does not tilt the fit): 1.30 ± 0.11, −3 ± 6 dB from 60 spots; 1.24 ±
+0.05, −6.7 ± 2.6 dB from 240.
 """
 
 from __future__ import annotations
@@ -31,9 +31,10 @@ from rmbuild.radiomap.reference import ReferenceSet
 
 #: dB; pairs are used only where both devices read at least this far above their detection floors: a
 #: mean within two or three reading-noise σ (5 dB for a k = 1.25 device) of where detection starts to fail
-#: (a few dB above the lowest reading) is a mean of the detected readings only. On the synthetic venue
-#: (six draws of 60 and of 240 spots, device k = 1.25) 10 dB left k at 1.12-1.18, 15 dB gave 1.22-1.24;
-#: on IPIN and UJI the fit moved by < 0.02 in k between 10 and 15 dB.
+#: (a few dB above the lowest reading) is a mean of the detected readings only. Synthetic venue, device
+#: k = 1.25, b = −6, eight draws (bench/bench_localizers.py): 10 dB gave k 1.23 ± 0.06 from 60 spots but
+#: 1.17 ± 0.02 from 240 (still biased); 15 dB 1.30 ± 0.11 and 1.24 ± 0.05. IPIN and UJI fits moved by
+#: < 0.02 in k between the two.
 FLOOR_MARGIN_DB = 15.0
 #: 1; fewer trimmed pairs than this and the fit falls back to all pairs (named in the result).
 MIN_TRIMMED_PAIRS = 10
