@@ -1,17 +1,21 @@
-"""Every localizer side by side under device heterogeneity, and per-scan latency on a map of >= 1,000 RPs.
-Writes bench/results/localizers.json. Run: ``python -m bench.bench_localizers`` (about 2-4 minutes).
+"""Every localizer side by side on five test beds, and per-scan latency on a map of >= 1,000 RPs.
+Writes bench/results/localizers.json and bench/results/localizers.md (the table).
+Run: ``nice -n 10 python -m bench.bench_localizers`` (about 10-15 minutes on the 2-core machine).
 
-Accuracy: the `default` preset (seed 7) with 4 test walks, the surveyed map (true positions of the map
-walks, 2 m cells) and the test walks' scans:
-  (a) same device: test walks on a device with k = 1, b = 0 (the map devices are k ~ 1 ± 0.05, b ~ 0 ± 2 dB);
-  (b) different device, uncalibrated: k = 1.25, b = −6 dB (φ_device = k ψ + b) — same walks and noise;
-  (c) (b) with the offline linear fit from co-located readings: both devices scan 60 spots on the test
-      walks' tracks 20 times each, standing; per (spot, AP) means where both detect the AP in >= 60 % of
-      scans; OLS device = k · map + b (He et al. 2015, ref. [21]). Queries mapped back with it; SLAC then
-      runs with [k, b] fixed at (1, 0) (P = 1); kNN "true calibration" maps them back with the true k, b.
-Real data: UJI long-term month 25 (Galaxy S3 map, Galaxy A5 test sets), fingerprint-only localizers.
-Latency: the `large` preset's surveyed map (1 m cells, >= 1,000 RPs); per-scan wall time of each localizer
-over the test walks' scans, one walk after the other (SLAC: P = 60, M = 7, with and without convergence).
+Test beds (the map is always *surveyed*: built from the map walks' reference positions, 2 m cells):
+  synthetic / same device: the `default` preset (seed 7), 4 test walks on a device with k = 1, b = 0.
+  synthetic / other device: the same walks and noise on a device φ = 1.25 ψ − 6 dB. Its offline fit:
+      both devices stand at 60 spots on the test walks' tracks, 20 scans each, one session per spot and
+      device; :func:`rmbuild.localize.calibration.fit_device_model` on the per-(spot, AP) means.
+  ILC site1/F1 (dev floor): map from 4 of every 5 walks, the others are tests (evaluate's default split);
+      reference positions = waypoints interpolated in time; phone PDR from the ILC reader.
+  IPIN 2023 floor -2: map from the Samsung A5 (SM-A520F) walks, tests on the Galaxy S7 (SM-G930F) walks;
+      reference = POSI marks interpolated in time; phone PDR from the IPIN reader (which PDR: see
+      ``pdr`` in the result). Offline fit per test route from the S7 walks of the *other* routes
+      (co-located 2 m cells of an S7 map against the A5 map).
+  UJI long-term month 25: map = training set trn01 (Galaxy S3), tests tst06-10 (Galaxy A5), per floor
+      (floor known); one RP per surveyed point. No motion data: sequence localizers are n/a. Offline fit:
+      trn01 against trn02 (the A5's training set at the same points).
 """
 
 from __future__ import annotations
@@ -25,18 +29,26 @@ import numpy as np
 from bench.common import write_result
 
 DEVICE = (1.25, -6.0)
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "datasets"
+UJI = SHARED / "uji-longterm" / "db"
+#: every registered localizer but the Kalman-smoothed variants of nb and ssd (knn_kf and slac_kf stand for them)
+NAMES = ("knn", "wknn", "nb", "ssd", "ssr", "hist", "hist_dir", "hist@paper", "hist_dir@paper", "mll", "pfl",
+         "slac", "smartloc", "smartloc_static", "knn_kf", "slac_kf", "offline_cal:knn", "offline_cal:mll",
+         "offline_cal:pfl")
+#: localizers that need each test walk's steps ("offline_cal:<base>" is `offline_cal` running <base>, as
+#: SLAC's comparison ran FL, MLL and PFL on offline-calibrated scans; "<hist>@paper" is the histogram
+#: localizer with the paper's mark scoring on unsmoothed histograms)
+SEQUENCE = {"hist_dir", "hist_dir@paper", "mll", "pfl", "slac", "smartloc", "smartloc_static", "knn_kf", "slac_kf",
+            "offline_cal:mll", "offline_cal:pfl"}
 
 
+# ------------------------------------------------------------------------------------------------ cases
 def _scenario(preset: str, test_device, n_test: int | None, cell_m: float, seed: int = 7):
     from rmbuild.config.evaluate import EvaluateConfig
     from rmbuild.config.ingest import IngestConfig
-    from rmbuild.config.radiomap import MapConfig
     from rmbuild.config.simulate import preset_config
-    from rmbuild.evaluate.localization import reference_positions, split_walks
     from rmbuild.ingest_core import build_dataset
     from rmbuild.io.formats.base import RawInput
-    from rmbuild.localize.base import Query
-    from rmbuild.radiomap import build_radio_map
     from rmbuild.synthetic import simulate
 
     c = preset_config(preset, seed)
@@ -46,163 +58,252 @@ def _scenario(preset: str, test_device, n_test: int | None, cell_m: float, seed:
     raw = RawInput(walks=sd.walks, poses=sd.poses, wifi=sd.wifi, fixes=sd.fixes, truth_poses=sd.truth_poses,
                    truth_aps=sd.truth_aps, venue=sd.venue)
     ds, fp, _ = build_dataset(raw, IngestConfig(), "sim")
+    from rmbuild.evaluate.localization import split_walks
+
     maps, test, _ = split_walks(ds, EvaluateConfig())
-    ref, _ = reference_positions(ds)
-    walk_of = ds.poses["walk_id"].astype(str).to_numpy()
-    wifi = ds.wifi[ds.wifi["walk_id"].astype(str).isin(maps)]
-    bssids = np.asarray(fp.bssids, dtype=object)
-    rm = build_radio_map(wifi, ref, walk_of, MapConfig(cell_size_m=cell_m), bssids=bssids)
-    q = Query.from_dataset(ds, test, bssids)
-    tp = ds.truth_poses
-    qxy = np.full((len(q), 2), np.nan)
-    for wid, rows in q.walks():
-        g = tp[tp["walk_id"].astype(str) == wid]
-        qxy[rows, 0] = np.interp(q.t_s[rows], g["t_s"], g["x_m"])
-        qxy[rows, 1] = np.interp(q.t_s[rows], g["t_s"], g["y_m"])
+    rm, q, qxy = surveyed_case(ds, fp.bssids, maps, test, cell_m)
     return sd, c, rm, q, qxy
 
 
-def offline_fit(sd, cfg, spots_xy: np.ndarray, device, n_scans: int = 20, seed: int = 1):
-    """Seed 000's offline calibration on the simulator: map device (k = 1, b = 0) and test device scan the
-    same spots ``n_scans`` times each, standing; OLS over per-(spot, AP) means both detect >= 60 %."""
-    from rmbuild.localize.slac import fit_device_model
+def surveyed_case(ds, bssids, map_walks, test_walks, cell_m: float = 2.0):
+    """(surveyed RadioMap of ``map_walks``, Query of ``test_walks``' scans, their reference xy)."""
+    from rmbuild.config.radiomap import MapConfig
+    from rmbuild.evaluate.localization import query_reference_xy, reference_positions
+    from rmbuild.localize.base import Query
+    from rmbuild.radiomap import build_radio_map
+
+    ref, _ = reference_positions(ds)
+    walk_of = ds.poses["walk_id"].astype(str).to_numpy()
+    wifi = ds.wifi[ds.wifi["walk_id"].astype(str).isin(set(map_walks))]
+    bssids = np.asarray(bssids, dtype=object)
+    rm = build_radio_map(wifi, ref, walk_of, MapConfig(cell_size_m=cell_m), bssids=bssids)
+    q = Query.from_dataset(ds, list(test_walks), bssids)
+    return rm, q, query_reference_xy(ds, q)
+
+
+def standing_means(sd, cfg, spots_xy: np.ndarray, device, n_scans: int = 20, seed: int = 1):
+    """The offline calibration's data on the simulator: the map's device (k = 1, b = 0) and the test device
+    each scan every spot ``n_scans`` times, standing, one session per spot. Returns (map means, device
+    means) per (spot, AP) over the scans that detected the AP, and each device's lowest reading."""
     from rmbuild.synthetic.radio import scan_readings
 
     rng = np.random.default_rng(seed)
     model = sd.radio
-    field = model.mean_rss_radios(spots_xy)
     n_b = len(model.bssid)
-    means = []
+    means, floors = [], []
     for k, b in ((1.0, 0.0), device):
         acc = np.zeros((len(spots_xy), n_b))
         cnt = np.zeros((len(spots_xy), n_b))
-        for _ in range(n_scans):
-            heading = rng.uniform(-np.pi, np.pi, len(spots_xy))
-            si, bi, rssi = scan_readings(model, cfg.radio, field, field, spots_xy, heading, k, b, rng)
-            np.add.at(acc, (si, bi), rssi)
-            np.add.at(cnt, (si, bi), 1.0)
-        with np.errstate(invalid="ignore"):
-            means.append(np.where(cnt >= 0.6 * n_scans, acc / np.maximum(cnt, 1), np.nan))
-    return fit_device_model(means[0], means[1])
+        low = np.inf
+        for i, spot in enumerate(spots_xy):
+            xy = np.repeat(spot[None], n_scans, axis=0)
+            field = model.mean_rss_radios(xy)
+            _, bi, rssi = scan_readings(model, cfg.radio, field, field, xy, rng.uniform(-np.pi, np.pi, n_scans),
+                                        k, b, rng)
+            np.add.at(acc[i], bi, rssi)
+            np.add.at(cnt[i], bi, 1.0)
+            low = min(low, float(rssi.min())) if len(rssi) else low
+        means.append(np.where(cnt > 0, acc / np.maximum(cnt, 1), np.nan))
+        floors.append(low)
+    return means[0], means[1], (floors[0], floors[1])
 
 
-def _localizers(case: str, calib: tuple[float, float] | None):
-    from rmbuild.config.evaluate import KnnConfig
-    from rmbuild.config.localize import SlacConfig
-    from rmbuild.localize.bayes import NaiveBayesLocalizer
-    from rmbuild.localize.knn import KnnLocalizer, WeightedKnnLocalizer
-    from rmbuild.localize.pfl import PflLocalizer
-    from rmbuild.localize.slac import SlacLocalizer
-    from rmbuild.localize.smoothing import KalmanSmoothed
-    from rmbuild.localize.ssd import SsdLocalizer
+def standing_fit(sd, cfg, spots_xy: np.ndarray, device, seed: int = 1, margins=(None,)):
+    """(DeviceFit per margin (None = the default), OLS (k, b) on the same pairs) from :func:`standing_means`."""
+    from rmbuild.localize.calibration import FLOOR_MARGIN_DB, fit_device_model
 
-    slac_cfg = SlacConfig() if case != "c" else SlacConfig(k_range=(1.0, 1.0), b_range_db=(0.0, 0.0),
-                                                           n_particles=1)
-    return {
-        "knn": KnnLocalizer(), "wknn": WeightedKnnLocalizer(),
-        "knn_exclude": KnnLocalizer(KnnConfig(missing="exclude")),
-        "nb": NaiveBayesLocalizer(), "ssd": SsdLocalizer(), "pfl": PflLocalizer(),
-        "slac": SlacLocalizer(slac_cfg),
-        "knn_kf": KalmanSmoothed(KnnLocalizer()), "slac_kf": KalmanSmoothed(SlacLocalizer(slac_cfg)),
-    }
+    x, y, floors = standing_means(sd, cfg, spots_xy, device, seed=seed)
+    ok = np.isfinite(x) & np.isfinite(y)
+    ols = np.polyfit(x[ok], y[ok], 1)
+    fits = [fit_device_model(x, y, floors, FLOOR_MARGIN_DB if m is None else m) for m in margins]
+    return (fits[0] if len(fits) == 1 else fits), (float(ols[0]), float(ols[1]))
 
 
-def _stats(e: np.ndarray) -> dict:
+def fit_study(draws: int = 8) -> dict:
+    """The offline fit's bias on the simulator: OLS vs :func:`fit_device_model` (floor margins 10 and 15 dB)
+    over ``draws`` random draws of 60 and of 240 standing spots (the `default` venue, device 1.25 / -6 dB)."""
+    sd, cfg, _, _, qxy = _scenario("default", DEVICE, 4, 2.0)
+    inside = np.flatnonzero(np.isfinite(qxy).all(axis=1))
+    out: dict = {"device": {"k": DEVICE[0], "b": DEVICE[1]}, "draws": draws}
+    for n_spots in (60, 240):
+        ks: dict[str, list] = {"ols": [], "fit_device_model (margin 10 dB)": [],
+                               "fit_device_model (margin 15 dB, default)": []}
+        for d in range(draws):
+            rng = np.random.default_rng(100 + d)
+            spots = qxy[rng.choice(inside, n_spots, replace=n_spots > len(inside))] + rng.normal(0, 0.5, (n_spots, 2))
+            (f10, f15), ols = standing_fit(sd, cfg, spots, DEVICE, seed=200 + d, margins=(10.0, 15.0))
+            ks["ols"].append(ols)
+            ks["fit_device_model (margin 10 dB)"].append((f10.k, f10.b))
+            ks["fit_device_model (margin 15 dB, default)"].append((f15.k, f15.b))
+        out[f"{n_spots}_spots"] = {m: {"k_mean": round(float(np.mean([v[0] for v in r])), 3),
+                                       "k_sd": round(float(np.std([v[0] for v in r])), 3),
+                                       "b_mean": round(float(np.mean([v[1] for v in r])), 2),
+                                       "b_sd": round(float(np.std([v[1] for v in r])), 2)} for m, r in ks.items()}
+    print("fit study", out, flush=True)
+    return out
+
+
+def read_real(folder: Path, fmt: str):
+    """A real data set read with rmbuild's own reader and ingest (default [pdr] and [ingest] config)."""
+    from rmbuild.config import IngestConfig, PdrConfig
+    from rmbuild.ingest_core import build_dataset
+    from rmbuild.io.formats import choose_reader, expand_inputs
+
+    files = expand_inputs([folder])
+    reader = choose_reader(files, fmt, PdrConfig())
+    raw = reader.read(files, IngestConfig())
+    ds, fp, summary = build_dataset(raw, IngestConfig(), source=reader.name)
+    pdr = [n for n in summary.get("notes", []) if "PDR" in n or "pdr" in n]
+    return ds, fp, pdr
+
+
+# ------------------------------------------------------------------------------------------------ runs
+def _stats(e: np.ndarray, n_unlocalized: int | None = None) -> dict:
+    """error_stats rounded; ``n_unlocalized``: scored scans without an estimate (n counts the others)."""
     from rmbuild.evaluate.localization import error_stats
 
     s = error_stats(e)
-    s["n_unlocalized"] = int(np.isnan(e).sum())
+    if n_unlocalized is not None:
+        s["n_unlocalized"] = n_unlocalized
     return {k: (round(v, 3) if isinstance(v, float) else v) for k, v in s.items()}
 
 
-def accuracy() -> dict:
+def run_one(name: str, rm, q, qxy, calib=None, cfg=None) -> tuple[np.ndarray | None, dict]:
+    """One localizer on one case: (per-scan errors (n,) m or None when n/a, extras for the report)."""
+    from rmbuild.config.evaluate import EvaluateConfig
+    from rmbuild.config.localize import OfflineCalibrationConfig
+    from rmbuild.localize.base import make_localizer
+
+    cfg = cfg or EvaluateConfig()
+    has_steps = q.steps is not None and any(len(v) for v in q.steps.values())
+    if name in SEQUENCE and not has_steps:
+        return None, {"n/a": "no step events"}
+    reg_name = name
+    if name.endswith("@paper"):
+        cfg = dataclasses.replace(cfg, hist=dataclasses.replace(cfg.hist, scoring="mark", smooth_db=0.0))
+        reg_name = name.split("@")[0]
+    if name.startswith("offline_cal"):
+        if calib is None:
+            return None, {"n/a": "no offline fit (same device)"}
+        base = name.split(":")[1] if ":" in name else "knn"
+        cfg = dataclasses.replace(cfg, offline_cal=OfflineCalibrationConfig(calib[0], calib[1], base))
+        reg_name = "offline_cal"
+    t0 = time.perf_counter()
+    loc = make_localizer(reg_name, cfg).fit(rm)
+    p = np.asarray(loc.predict(q), dtype=float)
+    scored = np.isfinite(qxy).all(axis=1)
+    extra: dict = {"ms_per_scan": round(1000 * (time.perf_counter() - t0) / max(len(q), 1), 2),
+                   "n_unlocalized": int((scored & ~np.isfinite(p).all(axis=1)).sum())}
+    summ = {k: v for k, v in loc.summary().items() if v not in ([], None, {})}
+    if summ:
+        extra["summary"] = summ
+    return np.hypot(*(p - qxy).T), extra
+
+
+def run_case(rm, q, qxy, calib=None, names=NAMES, cfg=None) -> dict:
+    """Every localizer of ``names`` on one case: error statistics, ms per scan, summary()."""
+    out: dict = {}
+    for name in names:
+        e, extra = run_one(name, rm, q, qxy, calib, cfg)
+        out[name] = extra if e is None else {**_stats(e), **extra}
+    return out
+
+
+def synthetic_cases() -> dict:
+    out = {}
+    _, _, rm, q, qxy = _scenario("default", (1.0, 0.0), 4, 2.0)
+    out["synthetic / same device"] = {"n_scans": len(q), "n_rps": rm.n_cells, "localizers": run_case(rm, q, qxy)}
+    print("synthetic same", _means(out["synthetic / same device"]), flush=True)
+    sd, cfg, rm, q, qxy = _scenario("default", DEVICE, 4, 2.0)
+    rng = np.random.default_rng(0)
+    spots = qxy[rng.choice(np.flatnonzero(np.isfinite(qxy).all(axis=1)), 60, replace=False)]
+    fit, ols = standing_fit(sd, cfg, spots, DEVICE)
+    res = run_case(rm, q, qxy, (fit.k, fit.b))
+    from rmbuild.localize.calibration import calibrate_query
     from rmbuild.localize.knn import KnnLocalizer
-    from rmbuild.localize.slac import calibrate_query
 
-    out: dict = {"preset": "default", "seed": 7, "n_test_walks": 4, "cell_size_m": 2.0, "map": "surveyed",
-                 "test_device": {"k": DEVICE[0], "b": DEVICE[1], "model": "phi_device = k * psi_map + b"}}
-    cases = {}
-    for case, dev in (("a_same_device", (1.0, 0.0)), ("b_uncalibrated", DEVICE), ("c_offline_fit", DEVICE)):
-        sd, cfg, rm, q, qxy = _scenario("default", dev, 4, 2.0)
-        calib = None
-        res: dict = {}
-        if case.startswith("c"):
-            rng = np.random.default_rng(0)
-            pick = rng.choice(np.flatnonzero(np.isfinite(qxy).all(axis=1)), 60, replace=False)
-            k, b, n = offline_fit(sd, cfg, qxy[pick], dev)
-            calib = (k, b)
-            res["offline_fit"] = {"k": round(k, 4), "b": round(b, 3), "n_pairs": n}
-            q = calibrate_query(q, k, b)
-        res["n_scans"] = int(len(q))
-        res["n_rps"] = int(rm.n_cells)
-        loc_out = {}
-        for name, loc in _localizers(case[0], calib).items():
-            t0 = time.perf_counter()
-            p = loc.fit(rm).predict(q)
-            dt = time.perf_counter() - t0
-            e = np.hypot(*(np.asarray(p) - qxy).T)
-            entry = _stats(e)
-            entry["ms_per_scan"] = round(1000 * dt / len(q), 2)
-            summ = loc.summary() if name not in ("knn", "wknn", "knn_exclude") else {}
-            if summ:
-                entry["summary"] = summ
-            if name == "slac":
-                entry["walks"] = [r.to_json() for r in loc.diagnostics.values()]
-            loc_out[name] = entry
-        if case.startswith("b"):
-            for name, cfgk in (("knn_true_calibration", None),):
-                p = KnnLocalizer(cfgk).fit(rm).predict(calibrate_query(q, *dev))
-                loc_out[name] = _stats(np.hypot(*(p - qxy).T))
-        res["localizers"] = loc_out
-        cases[case] = res
-        print(case, {k: v["mean"] for k, v in loc_out.items()}, flush=True)
-    out["cases"] = cases
-    b = cases["b_uncalibrated"]["localizers"]
-    s = b["slac"]["summary"]
-    out["done_when"] = {
-        "slac_k": s["k"], "slac_b": s["b"],
-        "k_within_10pct": abs(s["k"] - DEVICE[0]) <= 0.1 * DEVICE[0],
-        "b_within_2db": abs(s["b"] - DEVICE[1]) <= 2.0,
-        "slac_vs_uncalibrated_knn": round(b["slac"]["mean"] / b["knn"]["mean"], 3),
-        "slac_vs_true_calibrated_knn": round(b["slac"]["mean"] / b["knn_true_calibration"]["mean"], 3),
-    }
+    res["knn (true k, b)"] = _stats(np.hypot(*(KnnLocalizer().fit(rm).predict(calibrate_query(q, *DEVICE)) - qxy).T))
+    out["synthetic / other device"] = {
+        "n_scans": len(q), "n_rps": rm.n_cells, "device": {"k": DEVICE[0], "b": DEVICE[1]},
+        "offline_fit": fit.to_json(), "offline_fit_ols": {"k": round(ols[0], 4), "b": round(ols[1], 3)},
+        "localizers": res}
+    print("synthetic device", _means(out["synthetic / other device"]), fit, ols, flush=True)
     return out
 
 
-def latency() -> dict:
-    from rmbuild.config.localize import SlacConfig
-    from rmbuild.localize.slac import SlacLocalizer
+def ilc_case() -> dict:
+    folder = SHARED / "msft-ilc20" / "data" / "site1" / "F1"
+    if not folder.is_dir():
+        return {"unavailable": "msft-ilc20 site1/F1 not present"}
+    from rmbuild.config.evaluate import EvaluateConfig
+    from rmbuild.evaluate.localization import split_walks
 
-    sd, cfg, rm, q, qxy = _scenario("large", DEVICE, 2, 1.0)
-    walks = q.walks()
-    rows = np.concatenate([r for _, r in walks[:2]])
-    q2 = q.subset(np.sort(rows))
-    out = {"preset": "large", "cell_size_m": 1.0, "n_rps": int(rm.n_cells), "n_aps": int(len(rm.bssids)),
-           "n_scans": int(len(q2)), "realtime_budget_ms": 2000.0, "localizers": {}}
-    locs = dict(_localizers("b", None))
-    locs["slac_no_convergence"] = SlacLocalizer(SlacConfig(converge=False))
-    for name, loc in locs.items():
-        loc.fit(rm)
-        t0 = time.perf_counter()
-        p = loc.predict(q2)
-        dt = time.perf_counter() - t0
-        e = np.hypot(*(np.asarray(p) - qxy[np.sort(rows)]).T)
-        out["localizers"][name] = {"ms_per_scan": round(1000 * dt / len(q2), 3),
-                                   "mean_error_m": round(float(np.nanmean(e)), 2)}
-        print("latency", name, out["localizers"][name], flush=True)
+    ds, fp, pdr = read_real(folder, "msft-ilc")
+    maps, test, rule = split_walks(ds, EvaluateConfig())
+    rm, q, qxy = surveyed_case(ds, fp.bssids, maps, test)
+    res = {"split": rule, "n_map_walks": len(maps), "n_test_walks": len(test), "n_scans": len(q),
+           "n_rps": rm.n_cells, "pdr": pdr, "localizers": run_case(rm, q, qxy)}
+    print("ilc F1", _means(res), flush=True)
+    return res
+
+
+def ipin_case() -> dict:
+    folder = SHARED / "ipin2023" / "logs"
+    if not folder.is_dir():
+        return {"unavailable": "ipin2023 not present"}
+    ds, fp, pdr = read_real(folder, "ipin")
+    dev = dict(zip(ds.walks["walk_id"].astype(str), ds.walks["device_id"].astype(str), strict=True))
+    a5 = [w for w, d in dev.items() if "A520F" in d]
+    s7 = [w for w, d in dev.items() if "G930F" in d]
+    rm, q, qxy = surveyed_case(ds, fp.bssids, a5, s7)
+    fits = ipin_route_fits(ds, fp, rm, a5, s7)
+    # offline_cal: each test route's scans mapped with the fit from the other routes' S7 walks
+    from rmbuild.localize.calibration import calibrate_query
+
+    rss = q.rss_dbm.copy()
+    for route, f in fits.items():
+        rows = np.flatnonzero(np.char.find(q.walk_id.astype(str), route) >= 0)
+        rss[rows] = calibrate_query(q.subset(rows), f.k, f.b).rss_dbm
+    q_cal = dataclasses.replace(q, rss_dbm=rss)
+    res = run_case(rm, q, qxy, names=[n for n in NAMES if not n.startswith("offline_cal")])
+    for n in [n for n in NAMES if n.startswith("offline_cal")]:
+        res[n] = run_case(rm, q_cal, qxy, names=[n.split(":")[1]])[n.split(":")[1]]
+        res[n]["note"] = "S7 scans mapped by the fit from the other routes' S7 walks"
+    first = {}
+    for w in sorted(a5):
+        first.setdefault(w.split("_repetition")[0], w)
+    a5_map = sorted(first.values())
+    same = run_case(*surveyed_case(ds, fp.bssids, a5_map, [w for w in a5 if w not in a5_map]),
+                    names=("knn", "nb", "ssd", "hist", "hist_dir", "mll", "pfl", "slac", "smartloc", "smartloc_static"))
+    out = {"map": f"{len(a5)} Galaxy A5 walks", "tests": f"{len(s7)} Galaxy S7 walks", "n_scans": len(q),
+           "n_rps": rm.n_cells, "pdr": pdr, "offline_fits": {r: f.to_json() for r, f in fits.items()},
+           "localizers": res, "same_device_reference": {
+               "what": "map from the first A5 walk of each route, tests on the other A5 walk (same device)",
+               "localizers": same}}
+    print("ipin", _means(out), flush=True)
     return out
 
 
-def main() -> None:
-    res = {"accuracy": accuracy(), "latency": latency(), "uji_month25": uji_device_change()}
-    p = write_result("localizers", res)
-    print(f"wrote {p}")
+def ipin_route_fits(ds, fp, rm, a5: list[str], s7: list[str]) -> dict:
+    """Per test route (TrainingTrialNN): the S7-vs-A5 fit from the S7 walks of every other route."""
+    from rmbuild.localize.calibration import colocated_pairs, fit_device_model
+
+    routes = sorted({w.split("_repetition")[0] for w in s7})
+    fits = {}
+    for r in routes:
+        others = [w for w in s7 if not w.startswith(r)]
+        rm_s7, _, _ = surveyed_case(ds, fp.bssids, others, others[:1])
+        # same grid: both maps' cells snap to multiples of the cell size from the same origin convention
+        m, d = colocated_pairs(rm.reference_set("cells"), rm_s7.reference_set("cells"))
+        fits[r] = fit_device_model(m, d)
+    return fits
 
 
+def _means(case: dict) -> dict:
+    return {k: v.get("mean") for k, v in case["localizers"].items() if isinstance(v, dict)}
 
-UJI = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "uji-longterm" / "db"
 
-
+# ------------------------------------------------------------------------------------------------ UJI
 def read_uji(month: int, name: str) -> tuple[np.ndarray, np.ndarray]:
     """UJI long-term set ``db/MM/<name>{rss,crd}.csv.gz``: (RSSI (n, 620) float32 dBm with NaN = not
     detected (the file's 100), coordinates (n, 3) x m, y m, floor)."""
@@ -215,85 +316,116 @@ def read_uji(month: int, name: str) -> tuple[np.ndarray, np.ndarray]:
     return rss, crd
 
 
-def _uji_reference(rss: np.ndarray, crd: np.ndarray):
-    """One RP per distinct (x, y, floor): per-AP mean and unbiased std of its samples."""
-    from rmbuild.localize.base import ReferenceSet  # noqa: F811
+def uji_map(rss: np.ndarray, xy: np.ndarray, bssids: np.ndarray):
+    """A RadioMap with one 0.5 m cell per surveyed point (every sample its own node and walk: no direction)."""
+    import pandas as pd
 
-    key, inv = np.unique(np.round(crd, 3), axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    n, m = len(key), rss.shape[1]
-    det = ~np.isnan(rss)
-    v = np.nan_to_num(rss).astype(np.float64)
-    cnt = np.zeros((n, m))
-    s = np.zeros((n, m))
-    s2 = np.zeros((n, m))
-    np.add.at(cnt, inv, det)
-    np.add.at(s, inv, v)
-    np.add.at(s2, inv, v * v)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(cnt > 0, s / cnt, np.nan)
-        var = np.where(cnt > 1, (s2 - cnt * mean ** 2) / (cnt - 1), np.nan)
-    std = np.sqrt(np.maximum(var, 0.0))
-    return ReferenceSet(key[:, :2], mean.astype(np.float32), np.array([f"ap{j:03d}" for j in range(m)], dtype=object),
-                        std.astype(np.float32)), key[:, 2]
+    from rmbuild.config.radiomap import MapConfig
+    from rmbuild.radiomap import build_radio_map
+
+    r, c = np.nonzero(~np.isnan(rss))
+    wifi = pd.DataFrame({"node": r, "t_s": 0.0, "bssid": bssids[c], "rssi_dbm": rss[r, c].astype(float)})
+    return build_radio_map(wifi, xy, np.array([f"s{i}" for i in range(len(xy))]), MapConfig(cell_size_m=0.5),
+                           bssids=bssids)
 
 
-def uji_device_change() -> dict:
-    """Month 25: map from trn01 (Galaxy S3); tests tst01-05 (S3) vs tst06-10 (Galaxy A5, a real device
-    change); (c) A5 queries mapped back by an offline fit A5 = k S3 + b on the co-located training sets
-    trn01 (S3) / trn02 (A5) (same RPs). Fingerprint-only localizers, per floor (floor taken as known)."""
-    from rmbuild.localize.base import Query
-    from rmbuild.localize.bayes import NaiveBayesLocalizer
-    from rmbuild.localize.knn import KnnLocalizer, WeightedKnnLocalizer
-    from rmbuild.localize.slac import calibrate_query, fit_device_model
-    from rmbuild.localize.ssd import SsdLocalizer
-
+def uji_case() -> dict:
     if not UJI.is_dir():
-        return {"unavailable": "../shared/datasets/uji-longterm not present"}
+        return {"unavailable": "uji-longterm not present"}
+    from rmbuild.localize.base import Query
+    from rmbuild.localize.calibration import colocated_pairs, fit_device_model
+
+    bssids = np.array([f"ap{j:03d}" for j in range(620)], dtype=object)
     m_rss, m_crd = read_uji(25, "trn01")
     a5_rss, a5_crd = read_uji(25, "trn02")
-    ref, floor = _uji_reference(m_rss, m_crd)
-    ref_a5, floor_a5 = _uji_reference(a5_rss, a5_crd)
-    # co-located per-RP means: S3 map vs A5 training set at the same points
-    pos = {tuple(np.round(np.r_[p, f], 3)): i for i, (p, f) in enumerate(zip(ref.xy, floor, strict=True))}
-    rows = [(pos[tuple(np.round(np.r_[p, f], 3))], j) for j, (p, f) in enumerate(zip(ref_a5.xy, floor_a5, strict=True))
-            if tuple(np.round(np.r_[p, f], 3)) in pos]
-    ia, ib = np.array(rows).T
-    k, b, n_pairs = fit_device_model(ref.rss_dbm[ia], ref_a5.rss_dbm[ib])
-    out: dict = {"map": "month 25 trn01 (Galaxy S3)", "n_rps": int(len(ref)),
-                 "offline_fit_a5_vs_s3": {"k": round(k, 4), "b": round(b, 3), "n_pairs": n_pairs}, "cases": {}}
-    sets = {"a_same_device": ["tst01", "tst02", "tst03", "tst04", "tst05"],
-            "b_uncalibrated": ["tst06", "tst07", "tst08", "tst09", "tst10"],
-            "c_offline_fit": ["tst06", "tst07", "tst08", "tst09", "tst10"]}
-    for case, names in sets.items():
-        parts = [read_uji(25, nm) for nm in names]
-        rss = np.vstack([p[0] for p in parts])
-        crd = np.vstack([p[1] for p in parts])
-        q = Query(rss, ref.bssids, np.arange(len(rss), dtype=float), np.array(["q"] * len(rss), dtype=object),
-                  np.full(len(rss), -1, np.int64))
-        if case.startswith("c"):
-            q = calibrate_query(q, k, b)
-        res = {}
-        for name, mk in (("knn", KnnLocalizer), ("wknn", WeightedKnnLocalizer), ("nb", NaiveBayesLocalizer),
-                         ("ssd", SsdLocalizer)):
-            err = np.full(len(rss), np.nan)
-            for f in np.unique(floor):
-                rp = floor == f
-                sub = _rows_of(ref, rp)
-                qi = np.flatnonzero(crd[:, 2] == f)
-                p = mk().fit(sub).predict(q.subset(qi))
-                err[qi] = np.hypot(*(p - crd[qi, :2]).T)
-            res[name] = _stats(err)
-        out["cases"][case] = {"n_scans": int(len(rss)), "localizers": res}
-        print("uji", case, {k2: v["mean"] for k2, v in res.items()}, flush=True)
+    parts = [read_uji(25, f"tst{i:02d}") for i in range(6, 11)]
+    t_rss = np.vstack([p[0] for p in parts])
+    t_crd = np.vstack([p[1] for p in parts])
+    floors = np.unique(m_crd[:, 2])
+    maps, pairs_m, pairs_d = {}, [], []
+    for f in floors:
+        maps[f] = uji_map(m_rss[m_crd[:, 2] == f], m_crd[m_crd[:, 2] == f, :2], bssids)
+        rm_a5 = uji_map(a5_rss[a5_crd[:, 2] == f], a5_crd[a5_crd[:, 2] == f, :2], bssids)
+        pm, pdv = colocated_pairs(maps[f].reference_set("cells"), rm_a5.reference_set("cells"))
+        pairs_m.append(pm)
+        pairs_d.append(pdv)
+    fit = fit_device_model(np.vstack(pairs_m), np.vstack(pairs_d))
+    out_loc: dict = {}
+    for name in NAMES:
+        if name in SEQUENCE:
+            out_loc[name] = {"n/a": "no motion data in UJI"}
+            continue
+        err = np.full(len(t_rss), np.nan)
+        for f in floors:
+            qi = np.flatnonzero(t_crd[:, 2] == f)
+            q = Query(t_rss[qi], bssids, np.arange(len(qi), dtype=float),
+                      np.array(["q"] * len(qi), dtype=object), np.full(len(qi), -1, np.int64))
+            e, _ = run_one(name, maps[f], q, t_crd[qi, :2], (fit.k, fit.b))
+            err[qi] = e
+        out_loc[name] = _stats(err)
+    out = {"map": "month 25 trn01 (Galaxy S3), one RP per point, per floor", "tests": "tst06-10 (Galaxy A5)",
+           "n_scans": len(t_rss), "offline_fit": fit.to_json(), "localizers": out_loc}
+    print("uji", _means(out), flush=True)
     return out
 
 
-def _rows_of(ref, rows):
-    """The RPs ``rows`` of a ReferenceSet."""
-    from rmbuild.localize.base import ReferenceSet
+# ------------------------------------------------------------------------------------------------ table
+def table(cases: dict) -> list[str]:
+    """Markdown: one row per localizer, mean / median (m) per case."""
+    heads = [c for c in cases if "localizers" in cases[c]]
+    names = list(dict.fromkeys(n for c in heads for n in cases[c]["localizers"]))
+    lines = ["| localizer | " + " | ".join(heads) + " |", "|---|" + "---|" * len(heads)]
+    for n in names:
+        cells = []
+        for c in heads:
+            e = cases[c]["localizers"].get(n)
+            if e is None or "n/a" in e or e.get("mean") is None:
+                cells.append("n/a")
+            else:
+                cells.append(f"{e['mean']:.2f} / {e['median']:.2f}")
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append("mean / median position error in m over the test scans; n/a: the localizer needs step "
+                 "events the data set has not, or (offline_cal) there is no device to calibrate.")
+    return lines
 
-    return ReferenceSet(ref.xy[rows], ref.rss_dbm[rows], ref.bssids, None if ref.std_db is None else ref.std_db[rows])
+
+def latency() -> dict:
+    from rmbuild.config.localize import SlacConfig
+    from rmbuild.localize.base import make_localizer
+    from rmbuild.localize.slac import SlacLocalizer
+
+    _, _, rm, q, qxy = _scenario("large", DEVICE, 2, 1.0)
+    walks = q.walks()
+    rows = np.sort(np.concatenate([r for _, r in walks[:2]]))
+    q2 = q.subset(rows)
+    out = {"preset": "large", "cell_size_m": 1.0, "n_rps": int(rm.n_cells), "n_aps": int(len(rm.bssids)),
+           "n_scans": int(len(q2)), "realtime_budget_ms": 2000.0, "localizers": {}}
+    locs = {n: make_localizer(n) for n in NAMES if not n.startswith("offline_cal") and "@" not in n}
+    locs["slac_no_convergence"] = SlacLocalizer(SlacConfig(converge=False))
+    for name, loc in locs.items():
+        loc.fit(rm)
+        t0 = time.perf_counter()
+        p = loc.predict(q2)
+        dt = time.perf_counter() - t0
+        e = np.hypot(*(np.asarray(p) - qxy[rows]).T)
+        out["localizers"][name] = {"ms_per_scan": round(1000 * dt / len(q2), 3),
+                                   "mean_error_m": round(float(np.nanmean(e)), 2)}
+        print("latency", name, out["localizers"][name], flush=True)
+    return out
+
+
+def main() -> None:
+    cases = synthetic_cases()
+    cases["ILC site1/F1 (surveyed)"] = ilc_case()
+    cases["IPIN -2: A5 map, S7 tests"] = ipin_case()
+    cases["UJI month 25: S3 map, A5 tests"] = uji_case()
+    lines = table(cases)
+    (Path(__file__).resolve().parent / "results" / "localizers.md").write_text("\n".join(lines) + "\n")
+    p = write_result("localizers", {"table": lines, "cases": cases, "offline_fit_study": fit_study(),
+                                    "latency": latency()})
+    print("\n".join(lines))
+    print(f"wrote {p}")
 
 
 if __name__ == "__main__":

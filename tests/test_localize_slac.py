@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pandas as pd
@@ -11,15 +12,8 @@ import pytest
 from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import ConfigError, InputError
 from rmbuild.localize.base import Query, ReferenceSet
-from rmbuild.localize.slac import (
-    SlacLocalizer,
-    berhu,
-    calibrate_query,
-    fit_device_model,
-    greedy_capped,
-    project_capped_simplex,
-    to_map_units,
-)
+from rmbuild.localize.calibration import calibrate_query, fit_device_model, to_map_units
+from rmbuild.localize.slac import SlacLocalizer, berhu, greedy_capped, project_capped_simplex
 
 
 def _ref(n_rp=60, n_ap=12, seed=0, std=True):
@@ -87,8 +81,8 @@ def test_device_fit_and_calibration():
     rng = np.random.default_rng(3)
     psi = rng.uniform(-90, -40, 500)
     phi = 1.25 * psi - 6 + rng.normal(0, 0.5, 500)
-    k, b, n = fit_device_model(psi, phi)
-    assert k == pytest.approx(1.25, abs=0.02) and b == pytest.approx(-6, abs=1.0) and n == 500
+    fit = fit_device_model(psi, phi)
+    assert fit.k == pytest.approx(1.25, abs=0.02) and fit.b == pytest.approx(-6, abs=1.0) and fit.n_pairs == 500
     q = Query(phi[None].astype(np.float32), np.array(["a"] * 500, dtype=object), np.zeros(1),
               np.array(["w"], dtype=object), np.zeros(1, dtype=np.int64))
     back = calibrate_query(q, 1.25, -6.0).rss_dbm[0]
@@ -168,7 +162,10 @@ def test_config_validation():
     assert c.k_range == (0.5, 2.0) and c.n_particles == 60 and c.window_scans == 7
 
 
+@functools.lru_cache(maxsize=2)
 def _synthetic(device):
+    """(surveyed radio map, the two long test walks' scans, their true xy) of the `default` preset, seed 7,
+    test walks on ``device`` (cached: several test modules use it; nobody modifies it)."""
     from rmbuild.config.evaluate import EvaluateConfig
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config

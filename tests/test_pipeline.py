@@ -60,6 +60,9 @@ def test_map_outputs(tiny_ws: Path) -> None:
     assert side["frame"].startswith("walk:") and side["grid"]["cell_size_m"] == 2.0
     for key in ("map.coverage_png", "map.heatmaps_png"):
         assert ws.path(key).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    hist = ws.read_table("map.histograms")  # the RSS-histogram layer, by walking direction
+    assert hist["count"].sum() >= cells["count"].sum() and set(hist["sector"]) <= {-1, 0, 1, 2, 3}
+    assert side["histograms"]["bin_db"] == 2.0 and side["histograms"]["n_directions"] == 4
 
 
 def test_evaluate_report_shape(tiny_ws: Path) -> None:

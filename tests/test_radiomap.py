@@ -189,3 +189,36 @@ def test_built_positions_leave_out_walks_neither_linked_nor_anchored():
     tables["optimize.walks"] = walks.drop(columns="anchored")
     xy, info = built_positions(ws, ds, MapConfig())
     assert info["left_out_walks"] == ["b", "c"]
+
+
+def test_histogram_layer_counts_bins_and_directions():
+    from rmbuild.config.radiomap import HistogramConfig
+    from rmbuild.radiomap.histogram import HISTOGRAM_COLUMNS, direction_sector, motion_directions
+
+    wifi, xy, walk = _hand_data()
+    rm = build_radio_map(wifi, xy, walk, MapConfig(cell_size_m=2.0), origin_xy=np.zeros(2))
+    h = rm.histograms
+    assert h is not None and h.bin_db == 2.0 and h.n_directions == 4
+    assert int(h.count.sum()) == len(wifi)  # every reading counted once
+    # w0 moves from (0.5, 0.5) to (1.0, 1.5): 63 deg -> sector 1 (90 ± 45); w1 along +x -> sector 0
+    np.testing.assert_allclose(np.degrees(motion_directions(xy, walk)), [63.43, 63.43, 33.69, 33.69], atol=0.01)
+    c0 = int(np.flatnonzero((rm.cells.ix == 0) & (rm.cells.iy == 0))[0])
+    a = rm.bssids.tolist().index("a")
+    sel = (h.cell == c0) & (h.ap == a)
+    got = sorted(zip(h.sector[sel].tolist(), (h.bin[sel] * 2).tolist(), h.count[sel].tolist(), strict=True))
+    # a in cell 0: -50, -54, -58 (w0, sector 1) and -51 (w1, sector 0); bins of 2 dB floor(rssi / 2)
+    assert got == [(0, -52, 1), (1, -58, 1), (1, -54, 1), (1, -50, 1)]
+    assert direction_sector(np.radians([0, 44, 46, 179, -91, np.nan]), 4).tolist() == [0, 0, 1, 2, 3, -1]
+    assert direction_sector(np.radians([10.0]), 1).tolist() == [0]
+    t = h.long_table(rm.bssids, rm.cells)
+    assert tuple(t.columns) == HISTOGRAM_COLUMNS and (t["rssi_hi_dbm"] - t["rssi_lo_dbm"] == 2.0).all()
+    assert set(t["direction_deg"].dropna()) <= {0.0, 90.0, 180.0, 270.0}
+    none = build_radio_map(wifi, xy, walk, MapConfig(histogram=HistogramConfig(n_directions=0, bin_db=5.0)))
+    assert (none.histograms.sector == -1).all() and none.histograms.bin_db == 5.0
+    # standing still: no direction
+    assert np.isnan(motion_directions(np.zeros((3, 2)), np.array(["w"] * 3))).all()
+    from rmbuild.config.base import from_dict
+    from rmbuild.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        from_dict(MapConfig, {"histogram": {"n_directions": -1}})

@@ -6,15 +6,15 @@ import click
 
 from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
 from rmbuild.cli.view import rerun_option
+from rmbuild.localize.registry import describe, localizer_names
 
 
 @click.command()
 @workspace_option
 @click.option("--test-walks", default=None, metavar="ID,ID,...",
               help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
-@click.option("--localizer", "localizers", multiple=True,
-              help="Localizer(s) to run side by side (repeatable): knn, wknn, nb, ssd, pfl, slac, and Kalman-smoothed "
-                   "knn_kf, nb_kf, ssd_kf, slac_kf (default from config: knn, wknn).")
+@click.option("--localizer", "localizers", multiple=True, type=click.Choice(localizer_names()), metavar="NAME",
+              help=f"Localizer(s) to run side by side (repeatable; default from config: knn, wknn). {describe()}.")
 @rerun_option
 @common_options
 def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):

@@ -5,7 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from rmbuild.config.localize import BayesConfig, PflConfig, SlacConfig, SmoothingConfig, SsdConfig
+from rmbuild.config.localize import (
+    BayesConfig,
+    HistogramLocConfig,
+    MllConfig,
+    OfflineCalibrationConfig,
+    PflConfig,
+    SlacConfig,
+    SmartLocatorConfig,
+    SmoothingConfig,
+    SsdConfig,
+    SsrConfig,
+)
 
 
 @dataclass(frozen=True)
@@ -41,7 +52,7 @@ class KnnConfig:
 
 @dataclass(frozen=True)
 class EvaluateConfig:
-    # localizer registry names run side by side ("knn", "wknn"; later "slac", "nb", "pfl", "ssd").
+    # localizer registry names run side by side (rmbuild.localize.registry; `rmbuild evaluate --help`).
     localizers: tuple[str, ...] = ("knn", "wknn")
     # 1; default split when no walk has role "test": walk i (in walks order) is a test walk when
     # i % split_every == split_offset. Never splits a walk.
@@ -59,6 +70,11 @@ class EvaluateConfig:
     ssd: SsdConfig = field(default_factory=SsdConfig)
     pfl: PflConfig = field(default_factory=PflConfig)
     smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+    ssr: SsrConfig = field(default_factory=SsrConfig)
+    mll: MllConfig = field(default_factory=MllConfig)
+    smartloc: SmartLocatorConfig = field(default_factory=SmartLocatorConfig)
+    hist: HistogramLocConfig = field(default_factory=HistogramLocConfig)
+    offline_cal: OfflineCalibrationConfig = field(default_factory=OfflineCalibrationConfig)
 
     def validate(self) -> None:
         if not self.localizers:
@@ -68,5 +84,6 @@ class EvaluateConfig:
         if not 0 <= self.split_offset < self.split_every:
             raise ValueError("split_offset must be in [0, split_every)")
         self.knn.validate()
-        for sub in (self.slac, self.nb, self.ssd, self.pfl, self.smoothing):
+        for sub in (self.slac, self.nb, self.ssd, self.pfl, self.smoothing, self.ssr, self.mll, self.smartloc,
+                    self.hist, self.offline_cal):
             sub.validate()

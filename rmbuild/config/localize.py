@@ -1,9 +1,11 @@
-"""Config of the sequence and calibration-aware localizers: SLAC, naive Bayes, PFL, SSD, Kalman smoothing.
+"""Config of the localizers beyond kNN: SLAC, MLL, PFL, SSD, SSR, naive Bayes, SmartLocator's fusion, the
+RSS-histogram matchers, Kalman smoothing and the offline device calibration (docs/localizers.md).
 
-Every number the papers give is a field with its paper default (docs/localizers.md; docs/references.md:
-He et al. 2015 for SLAC, PFL and SSD, Becker et al. 2015 for naive Bayes, the subway-station paper for
-Kalman smoothing, Chen et al. 2018 for the particle step/heading corrections). Fields the papers leave open
-carry our default and say so.
+Every number the papers give is a field with its paper default (docs/localizers.md cites them): SLAC (He,
+Chan, Yu, Liu, UbiComp 2015) and its baselines MLL, PFL, SSD, SSR and offline linear fitting; SmartLocator
+(Becker, Jäger, Süß, ICONS 2015: naive Bayes, auto-adaptive fusion); the subway-station Wi-Fi + PDR paper
+(RSS histograms, direction-aware fingerprints, Kalman smoothing); UILoc (Sensors 2018: particle step and
+heading corrections). Fields the papers leave open carry our default and say so.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ def _positive(name: str, v: float) -> None:
 
 @dataclass(frozen=True)
 class SlacConfig:
-    """SLAC: simultaneous localization and calibration (He et al. 2015 eq. 5-29, Algorithm 1)."""
+    """SLAC: simultaneous localization and calibration (He et al. 2015, eq. 5-29, Algorithm 1)."""
 
     # scans; sliding window M of temporal targets jointly localized (He et al. 2015: 7).
     window_scans: int = 7
@@ -58,7 +60,7 @@ class SlacConfig:
     # dB; initial range of the device offset b (He et al. 2015: [-10, 0]).
     b_range_db: tuple[float, float] = (-10.0, 0.0)
     # Which way [k, b] maps signals. "device": the test device reads φ = k ψ + b for a map-device reading ψ
-    # (the simulator's model; the map is compared with (φ - b) / k). "calibration": He et al. 2015 eq. 5 literally,
+    # (the simulator's model; the map is compared with (φ - b) / k). "calibration": He et al. 2015, eq. 5 literally,
     # φ̃ = k φ + b is compared with the map.
     device_model: Literal["device", "calibration"] = "device"
     # Particle weight (eq. 22). "distance": He et al. 2015, walked vs. estimated window distance only;
@@ -134,7 +136,7 @@ class BayesConfig:
     # dB; kernel bandwidth σ of eq. 4 (Becker et al. 2015 gives none; ours). The per-RP kernel density of eq. 3 is
     # taken as N(ψ̄, σ² + σ_q²) with σ_q the RP's std when the map has it.
     kernel_sigma_db: float = 4.0
-    # dBm; a reading missing on one side counts as this value (Gu et al. 2017: -110).
+    # dBm; a reading missing on one side counts as this value (METHOD.md §3's -110).
     fill_dbm: float = -110.0
     # 1; position interpolated from the K most probable RPs (eq. 5; Becker et al. 2015: 3).
     k: int = 3
@@ -149,7 +151,7 @@ class BayesConfig:
 
 @dataclass(frozen=True)
 class SsdConfig:
-    """Signal-strength-difference fingerprints (Hossain et al. 2013, a baseline of He et al. 2015).
+    """Signal-strength-difference fingerprints (He et al. 2015's online calibration baseline [26]).
 
     The mean over AP pairs of the squared difference of pairwise differences equals twice the variance of
     the per-AP residual φ - ψ over the shared APs, so a constant offset b cancels exactly.
@@ -216,7 +218,7 @@ class PflConfig:
 
 @dataclass(frozen=True)
 class SmoothingConfig:
-    """Kalman post-filter of a localizer's track using PDR displacements (subway-station paper §III.C)."""
+    """Kalman post-filter of a localizer's track using PDR displacements (the subway-station paper §C)."""
 
     # m; σ of a localizer position (measurement noise R = σ²).
     measurement_sd_m: float = 4.0
@@ -228,7 +230,7 @@ class SmoothingConfig:
     # scans; the rotation of the walk's PDR frame into the map frame is the least-squares angle between
     # PDR and localizer displacements over the last this many scans (causal).
     rotation_window_scans: int = 15
-    # "filter": causal Kalman filter (subway-station paper); "rts": plus a Rauch-Tung-Striebel backward pass (offline).
+    # "filter": causal Kalman filter (the subway-station paper); "rts": plus a Rauch-Tung-Striebel backward pass (offline).
     mode: Literal["filter", "rts"] = "filter"
 
     def validate(self) -> None:
@@ -239,3 +241,155 @@ class SmoothingConfig:
             raise ValueError("smoothing: process noise must not be 0")
         if self.rotation_window_scans < 2:
             raise ValueError("smoothing.rotation_window_scans must be >= 2")
+
+
+@dataclass(frozen=True)
+class SsrConfig:
+    """Signal-strength-ratio fingerprints (SLAC's online-calibration baseline SSR): the pairwise ratios
+    φ_i / φ_j of the RSSI values in dBm, compared as log-ratios, so a device gain k cancels exactly."""
+
+    # 1; K nearest RPs by SSR distance, mean position (SLAC's FL uses 15).
+    k: int = 15
+    # 1; RPs sharing fewer detected APs with the scan are never neighbours (>= 2: one pair).
+    min_shared_aps: int = 3
+    # 1; and sharing fewer than this fraction of the scan's detected APs.
+    min_shared_fraction: float = 0.5
+    # "cells" or "nodes".
+    reference: Literal["cells", "nodes"] = "cells"
+
+    def validate(self) -> None:
+        if self.k < 1:
+            raise ValueError("ssr.k must be >= 1")
+        if self.min_shared_aps < 2:
+            raise ValueError("ssr.min_shared_aps must be >= 2")
+        if not 0.0 <= self.min_shared_fraction <= 1.0:
+            raise ValueError("ssr.min_shared_fraction must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class MllConfig:
+    """MLL: maximum likelihood of the Wi-Fi fingerprints and the walked distances over a window of scans
+    (SLAC's baseline MLL; conditional independence between scans and steps, as the paper describes it)."""
+
+    # scans; the window over which the likelihood product is maximised (SLAC's window M = 7; MLL's own is
+    # not given).
+    window_scans: int = 7
+    # 1; RPs per scan kept as states (the most likely by Wi-Fi alone; ours, bounds the cost).
+    n_candidates: int = 30
+    # m; σ of the walked-distance likelihood N(‖r_m − r_{m−1}‖ − δ_m; 0, σ²) (SLAC's T = 2 m, its measured
+    # walked-distance error).
+    motion_sd_m: float = 2.0
+    # dB; σ of the per-AP Gaussian Wi-Fi likelihood (as naive Bayes: N(ψ̄, σ² + σ_q²); ours).
+    kernel_sigma_db: float = 4.0
+    # dBm; a reading missing on one side counts as this value.
+    fill_dbm: float = -110.0
+    # "cells" or "nodes".
+    reference: Literal["cells", "nodes"] = "cells"
+
+    def validate(self) -> None:
+        if self.window_scans < 1:
+            raise ValueError("mll.window_scans must be >= 1")
+        if self.n_candidates < 1:
+            raise ValueError("mll.n_candidates must be >= 1")
+        _positive("mll.motion_sd_m", self.motion_sd_m)
+        _positive("mll.kernel_sigma_db", self.kernel_sigma_db)
+
+
+@dataclass(frozen=True)
+class SmartLocatorConfig:
+    """SmartLocator's auto-adaptive dead reckoning (Becker et al. 2015 eq. 8-9): each naive-Bayes fix is
+    blended into the PDR-propagated position with weight α = min(Q + α_t, 1)."""
+
+    # 1; the largest accuracy factor Q a Wi-Fi fix gets (paper Fig. 6: 0.3); Q rises linearly from 0 to it
+    # over aps_range APs in the scan.
+    q_max: float = 0.3
+    # APs; Q = 0 at the lower count, q_max at the upper (paper Fig. 6: 2 and 5).
+    aps_range: tuple[float, float] = (2.0, 5.0)
+    # 1/s; the time-dependent factor α_t grows by this per second since the last fix (paper Fig. 4: 0.04).
+    time_gain_per_s: float = 0.04
+    # 1; and stops growing here (paper Fig. 4: 0.4 at 10 s).
+    time_gain_max: float = 0.4
+    # 1; α of the static-weight variant `smartloc_static` (the paper's comparison: 0.5).
+    static_weight: float = 0.5
+    # scans; the walk's PDR frame is rotated into the map frame by the least-squares angle between PDR and
+    # fix displacements over the last this many scans (ours: the paper's PDR heading is a compass heading).
+    rotation_window_scans: int = 15
+
+    def validate(self) -> None:
+        if not 0.0 <= self.q_max <= 1.0:
+            raise ValueError("smartloc.q_max must be in [0, 1]")
+        _range("smartloc.aps_range", self.aps_range, 0.0)
+        if self.aps_range[0] == self.aps_range[1]:
+            raise ValueError("smartloc.aps_range needs two different bounds")
+        if self.time_gain_per_s < 0 or not 0.0 <= self.time_gain_max <= 1.0:
+            raise ValueError("smartloc: time_gain_per_s must be >= 0 and time_gain_max in [0, 1]")
+        if not 0.0 < self.static_weight <= 1.0:
+            raise ValueError("smartloc.static_weight must be in (0, 1]")
+        if self.rotation_window_scans < 2:
+            raise ValueError("smartloc.rotation_window_scans must be >= 2")
+
+
+@dataclass(frozen=True)
+class HistogramLocConfig:
+    """Matching single scans against per-cell RSS histograms (the subway-station paper's §III-B),
+    optionally with the walking direction (`hist_dir`)."""
+
+    # How an RP is scored. "mark": the paper's feature matching and probability mark (an RP is a candidate
+    # when match_fraction of the scan's APs fall into occupied bins; mark = D · mean of Pr · R over them;
+    # the best marks holding mark_share of the total are averaged). "likelihood" (ours): the product over
+    # the scan's APs of the bin probabilities (floor_prob where the RP's histogram has none), times D;
+    # the k most probable RPs averaged, posterior-weighted.
+    scoring: Literal["mark", "likelihood"] = "likelihood"
+    # dB; each map reading is spread over the neighbouring bins by a Gaussian of this σ before matching
+    # (ours; 0 = the paper's plain histograms, whose bins a single scan rarely hits when a cell holds only
+    # a few readings per AP).
+    smooth_db: float = 4.0
+    # 1; "mark": an RP is a candidate when at least this fraction of the scan's APs fall into an occupied
+    # bin of its histograms (paper: 70 %); when none reaches it, those matching the most APs are.
+    match_fraction: float = 0.7
+    # 1; "mark": the best-marked candidates whose marks add up to this share of all candidates' marks are
+    # averaged, weighted by mark (paper: 5 %).
+    mark_share: float = 0.05
+    # 1; "likelihood": probability of a reading in a bin where the RP's histogram of that AP has none.
+    floor_prob: float = 0.01
+    # 1; "likelihood": the position is the posterior-weighted mean of the k most probable RPs.
+    k: int = 3
+    # 1; D, the score's gain when the RP's walking direction is the walker's (paper: 1.2).
+    direction_gain: float = 1.2
+    # scans; `hist_dir` rotates the walk's PDR directions into the map frame by the least-squares angle
+    # between PDR and its own direction-free fix displacements over the last this many scans (ours).
+    rotation_window_scans: int = 15
+
+    def validate(self) -> None:
+        if not 0.0 <= self.match_fraction <= 1.0:
+            raise ValueError("hist.match_fraction must be in [0, 1]")
+        if not 0.0 < self.mark_share <= 1.0:
+            raise ValueError("hist.mark_share must be in (0, 1]")
+        if not 0.0 <= self.smooth_db <= 20.0:
+            raise ValueError("hist.smooth_db must be in [0, 20]")
+        if not 0.0 < self.floor_prob < 1.0:
+            raise ValueError("hist.floor_prob must be in (0, 1)")
+        if self.k < 1:
+            raise ValueError("hist.k must be >= 1")
+        if self.direction_gain < 1.0:
+            raise ValueError("hist.direction_gain must be >= 1")
+        if self.rotation_window_scans < 2:
+            raise ValueError("hist.rotation_window_scans must be >= 2")
+
+
+@dataclass(frozen=True)
+class OfflineCalibrationConfig:
+    """`offline_cal`: a localizer run on scans mapped back by a device model fitted offline (SLAC's
+    comparison case), φ_device = k ψ_map + b; see rmbuild.localize.calibration.fit_device_model."""
+
+    # 1; the test device's gain k against the map's device (1 = same device).
+    k: float = 1.0
+    # dB; the test device's offset b (0 = same device).
+    b_db: float = 0.0
+    # registry name of the localizer that runs on the mapped scans (a single-scan one: knn, wknn, nb, ...).
+    base: str = "knn"
+
+    def validate(self) -> None:
+        _positive("offline_cal.k", self.k)
+        if self.base == "offline_cal":
+            raise ValueError("offline_cal.base must name another localizer")

@@ -1,4 +1,4 @@
-"""Config of `rmbuild export-map` (docs/method.md; He et al. 2015 eq. 1-3, subway-station paper)."""
+"""Config of `rmbuild export-map` (docs/localizers.md for the histogram layer)."""
 
 from __future__ import annotations
 
@@ -46,8 +46,26 @@ class FillConfig:
 
 
 @dataclass(frozen=True)
+class HistogramConfig:
+    """Per-cell RSS histograms, kept apart by walking direction (the subway-station Wi-Fi + PDR paper)."""
+
+    # dB; width of a histogram bin (paper: about 2 dB).
+    bin_db: float = 2.0
+    # 1; walking-direction sectors the histograms are kept apart by, centred on the map's +x axis and
+    # every 360/n deg from it (0 = no direction). The paper keeps the two directions of each straight
+    # sub-area apart; 4 sectors do that for corridors along either map axis.
+    n_directions: int = 4
+
+    def validate(self) -> None:
+        if not self.bin_db > 0:
+            raise ValueError("histogram.bin_db must be > 0")
+        if not 0 <= self.n_directions <= 36:
+            raise ValueError("histogram.n_directions must be in [0, 36]")
+
+
+@dataclass(frozen=True)
 class MapConfig:
-    # m; grid cell edge (subway-station paper: 1 m, SLAC's survey: 5 m). Must be > 0.
+    # m; grid cell edge (the subway-station paper: 1 m, SLAC's survey: 5 m). Must be > 0.
     cell_size_m: float = 2.0
     # 1; minimum readings T of an AP in a cell for its statistics to be kept (T_min; fewer -> not detected).
     min_count: int = 1
@@ -63,6 +81,7 @@ class MapConfig:
     # where optimize put them.
     include_unlinked_walks: bool = False
     fill: FillConfig = field(default_factory=FillConfig)
+    histogram: HistogramConfig = field(default_factory=HistogramConfig)
 
     def validate(self) -> None:
         if not self.cell_size_m > 0:
@@ -74,3 +93,4 @@ class MapConfig:
         if self.heatmap_top_n < 0:
             raise ValueError("heatmap_top_n must be >= 0")
         self.fill.validate()
+        self.histogram.validate()

@@ -140,6 +140,17 @@ def reference_positions(dataset: Dataset) -> tuple[np.ndarray, str | None]:
     return ref, src
 
 
+def query_reference_xy(dataset: Dataset, query: Query) -> np.ndarray:
+    """float64 (n_queries, 2) reference position of every query scan: its walk's reference track (truth
+    poses, else fixes) interpolated at the scan time; NaN outside the track or without one."""
+    tracks, _ = _reference_tracks(dataset)
+    out = np.full((len(query), 2), np.nan)
+    for wid, rows in query.walks():
+        if wid in tracks:
+            out[rows] = _interp_track(*tracks[wid], query.t_s[rows])
+    return out
+
+
 def _apply(r: np.ndarray, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return xy @ r.T + t
 
@@ -214,7 +225,8 @@ class EvalResult:
 
     def table(self) -> str:
         """A short fixed-width text table: one row per map and localizer."""
-        head = f"{'map':<9}{'localizer':<10}{'mean':>7}{'median':>8}{'p90':>7}{'rmse':>7}{'max':>7}" \
+        w = max([len("localizer")] + [len(loc) for d in self.stats.values() for loc in d]) + 1
+        head = f"{'map':<9}{'localizer':<{w}}{'mean':>7}{'median':>8}{'p90':>7}{'rmse':>7}{'max':>7}" \
                f"{'<5m':>6}{'<10m':>6}{'n':>6}"
         lines = [head, "-" * len(head)]
 
@@ -223,7 +235,7 @@ class EvalResult:
 
         for m in MAP_NAMES:
             for loc, s in self.stats.get(m, {}).items():
-                lines.append(f"{m:<9}{loc:<10}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
+                lines.append(f"{m:<9}{loc:<{w}}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
                              f"{f(s['rmse'], 7)}{f(s['max'], 7)}{f(s['p_lt_5m'], 6)}{f(s['p_lt_10m'], 6)}"
                              f"{s['n']:>6d}")
         lines.append(f"gauge: {self.gauge}; test walks: {len(self.test_walks)} ({self.split_rule}); "
@@ -345,11 +357,7 @@ def evaluate(
     query = Query.from_dataset(dataset, test, bssids, unit=cfg.query)
     if len(query) == 0:
         raise InputError("the test walks have no Wi-Fi scans")
-    tracks, _ = _reference_tracks(dataset)
-    q_ref = np.full((len(query), 2), np.nan)
-    for wid, rows in query.walks():
-        if wid in tracks:
-            q_ref[rows] = _interp_track(*tracks[wid], query.t_s[rows])
+    q_ref = query_reference_xy(dataset, query)
     q_node = query.node
     q_built = np.where((q_node >= 0)[:, None], built_al[np.maximum(q_node, 0)], np.nan)
 
@@ -364,10 +372,10 @@ def evaluate(
             p = np.asarray(loc.predict(query), dtype=float)
             preds[mname][lname] = p
             if src is not None:
-                e = np.hypot(*(p - q_ref).T)
-                errors[mname][lname] = e
+                err = np.hypot(*(p - q_ref).T)
+                errors[mname][lname] = err
                 # localizer-specific figures (e.g. SLAC's calibrated k, b, alpha, beta) beside the errors
-                stats[mname][lname] = {**error_stats(e), **loc.summary()}
+                stats[mname][lname] = {**error_stats(err), **loc.summary()}
             if mname == "built":
                 consistency.setdefault("built", {})[lname] = error_stats(np.hypot(*(p - q_built).T))
     if src is None:

@@ -75,6 +75,7 @@ ARTEFACTS: dict[str, str] = {
     "map.nodes": "map/reference_nodes.parquet",
     "map.wide_csv": "map/radiomap_uji.csv",
     "map.sidecar": "map/radiomap.json",
+    "map.histograms": "map/histograms.parquet",
     "map.coverage_png": "map/coverage.png",
     "map.heatmaps_png": "map/heatmaps.png",
     # evaluate

@@ -15,12 +15,14 @@ walk's scans in time order with :meth:`Query.walks` and read its steps from :att
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol, runtime_checkable
 
 import numpy as np
 import pandas as pd
 
 from rmbuild.errors import InputError
+from rmbuild.localize.registry import REGISTRY
+from rmbuild.radiomap.reference import ReferenceSet
 
 if TYPE_CHECKING:
     from rmbuild.radiomap.build import RadioMap
@@ -28,33 +30,6 @@ if TYPE_CHECKING:
 
 #: Columns of a per-walk step table (walk's own PDR frame): step time, length, heading, step frequency.
 STEP_COLUMNS = ("t_s", "step_length_m", "heading_rad", "step_freq_hz")
-
-
-@dataclass
-class ReferenceSet:
-    """Reference points (RPs) a localizer matches against: grid cells of a radio map or raw map nodes.
-
-    ``xy``: float64 (n_rp, 2) metres, map frame. ``rss_dbm``: float32 (n_rp, n_ap) mean RSSI, NaN = not
-    detected. ``std_db``: float32 (n_rp, n_ap) unbiased per-AP std (NaN where fewer than 2 readings or not
-    detected) or None. ``count``: int32 (n_rp, n_ap) readings per AP or None. ``interpolated``: bool (n_rp,)
-    True for filled (never visited) cells. ``kind``: "cells" or "nodes".
-    """
-
-    xy: np.ndarray
-    rss_dbm: np.ndarray
-    bssids: np.ndarray
-    std_db: np.ndarray | None = None
-    count: np.ndarray | None = None
-    interpolated: np.ndarray | None = None
-    kind: str = "cells"
-
-    def __len__(self) -> int:
-        return len(self.xy)
-
-    def __post_init__(self) -> None:
-        n = len(self.xy)
-        if self.rss_dbm.shape != (n, len(self.bssids)):
-            raise ValueError(f"rss_dbm shape {self.rss_dbm.shape} != ({n}, {len(self.bssids)})")
 
 
 @dataclass
@@ -155,7 +130,7 @@ class Query:
         steps = {w: steps_from_poses(dataset.poses[dataset.poses["walk_id"].astype(str) == w])
                  for w in map(str, walk_ids)}
         q = Query(mean, bssids, t_q, w_q, node_q, steps)
-        o = np.lexsort((q.t_s, [order[w] for w in q.walk_id]))
+        o = np.lexsort((q.t_s, np.array([order[w] for w in q.walk_id])))
         return q.subset(o)
 
 
@@ -201,6 +176,17 @@ def checked(cfg, default_cls: type):
     return cfg
 
 
+def sub_config(cfg, name: str, cls: type):
+    """The localizer's own config from ``cfg``: an instance of ``cls`` as is, an EvaluateConfig's field
+    ``name`` when it has one, else ``cls()``."""
+    if cfg is None:
+        return cls()
+    if isinstance(cfg, cls):
+        return cfg
+    sub = getattr(cfg, name, None)
+    return sub if isinstance(sub, cls) else cls()
+
+
 def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> ReferenceSet:
     """A :class:`ReferenceSet` from a RadioMap (its ``kind`` view: "cells" or "nodes") or as is."""
     if isinstance(ref, ReferenceSet):
@@ -208,20 +194,8 @@ def as_reference(ref: RadioMap | ReferenceSet, kind: str = "cells") -> Reference
     return ref.reference_set(kind)
 
 
-#: Registry: name -> "module:Class". Explicit and lazily imported; a localizer class provides
-#: ``from_config(cfg: EvaluateConfig)`` returning a configured, unfitted instance.
-LOCALIZERS: dict[str, str] = {
-    "knn": "rmbuild.localize.knn:KnnLocalizer",
-    "wknn": "rmbuild.localize.knn:WeightedKnnLocalizer",
-    "nb": "rmbuild.localize.bayes:NaiveBayesLocalizer",
-    "ssd": "rmbuild.localize.ssd:SsdLocalizer",
-    "pfl": "rmbuild.localize.pfl:PflLocalizer",
-    "slac": "rmbuild.localize.slac:SlacLocalizer",
-    "knn_kf": "rmbuild.localize.smoothing:KnnKalman",
-    "nb_kf": "rmbuild.localize.smoothing:NaiveBayesKalman",
-    "ssd_kf": "rmbuild.localize.smoothing:SsdKalman",
-    "slac_kf": "rmbuild.localize.smoothing:SlacKalman",
-}
+#: Registry: name -> "module:Class" (see :mod:`rmbuild.localize.registry`, which also describes each).
+LOCALIZERS: dict[str, str] = {name: target for name, (target, _) in REGISTRY.items()}
 
 
 def localizer_class(name: str) -> type:
@@ -240,4 +214,5 @@ def make_localizer(name: str, cfg=None):
         from rmbuild.config.evaluate import EvaluateConfig
 
         cfg = EvaluateConfig()
-    return localizer_class(name).from_config(cfg)
+    cls: Any = localizer_class(name)
+    return cls.from_config(cfg)

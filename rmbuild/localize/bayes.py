@@ -19,8 +19,7 @@ import numpy as np
 
 from rmbuild.config.localize import BayesConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
-from rmbuild.localize.slac import sub_config
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
 
 _BLOCK = 512
 
@@ -59,18 +58,26 @@ class NaiveBayesLocalizer:
         x = np.where(np.isnan(rss_dbm), self.cfg.fill_dbm, rss_dbm.astype(np.float64))
         return -0.5 * ((x * x) @ self._iv.T - 2.0 * x @ self._yiv.T + self._const[None, :])
 
+    def top(self, rss_dbm: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` most probable RPs of each scan (n, L): (idx (n, k) int64, log P(x|C) (n, k)), unordered."""
+        n_rp = len(self.ref)  # type: ignore[arg-type]
+        k = min(k, n_rp)
+        idx = np.empty((len(rss_dbm), k), dtype=np.int64)
+        ll = np.empty((len(rss_dbm), k))
+        for s in range(0, len(rss_dbm), _BLOCK):
+            full = self.log_likelihood(rss_dbm[s:s + _BLOCK])
+            top = np.argpartition(-full, k - 1, axis=1)[:, :k] if k < n_rp else \
+                np.broadcast_to(np.arange(n_rp), full.shape).copy()
+            idx[s:s + _BLOCK] = top
+            ll[s:s + _BLOCK] = np.take_along_axis(full, top, axis=1)
+        return idx, ll
+
     def predict_rss(self, rss_dbm: np.ndarray) -> np.ndarray:
         """(n, 2) positions (eq. 5) from scans in the reference's AP order."""
-        k = min(self.cfg.k, len(self.ref))  # type: ignore[arg-type]
-        out = np.empty((len(rss_dbm), 2))
-        for s in range(0, len(rss_dbm), _BLOCK):
-            ll = self.log_likelihood(rss_dbm[s:s + _BLOCK])
-            top = np.argpartition(-ll, k - 1, axis=1)[:, :k]
-            lt = np.take_along_axis(ll, top, axis=1)
-            p = np.exp(lt - lt.max(axis=1, keepdims=True))
-            p /= p.sum(axis=1, keepdims=True)
-            out[s:s + _BLOCK] = (p[:, :, None] * self.ref.xy[top]).sum(axis=1)  # type: ignore[union-attr]
-        return out
+        top, lt = self.top(rss_dbm, self.cfg.k)
+        p = np.exp(lt - lt.max(axis=1, keepdims=True))
+        p /= p.sum(axis=1, keepdims=True)
+        return (p[:, :, None] * self.ref.xy[top]).sum(axis=1)  # type: ignore[union-attr]
 
     def predict(self, query: Query) -> np.ndarray:
         if self.ref is None:

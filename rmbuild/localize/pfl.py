@@ -19,9 +19,8 @@ import pandas as pd
 
 from rmbuild.config.evaluate import KnnConfig
 from rmbuild.config.localize import PflConfig
-from rmbuild.localize.base import Query, as_reference, checked
+from rmbuild.localize.base import Query, as_reference, checked, sub_config
 from rmbuild.localize.knn import KnnLocalizer
-from rmbuild.localize.slac import sub_config
 
 
 class PflLocalizer:

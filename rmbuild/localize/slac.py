@@ -1,4 +1,4 @@
-"""SLAC: simultaneous localization and calibration (He et al. 2015; docs/localizers.md).
+"""SLAC: simultaneous localization and calibration (He et al. 2015; METHOD.md §8 restates its equations).
 
 Per test walk, scans in time order. For each new scan the last ``M`` scans (the window) are localized
 jointly for every particle ``p`` = device model ``[k_p, b_p]``:
@@ -42,57 +42,10 @@ import pandas as pd
 
 from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
+from rmbuild.localize.calibration import to_map_units
 
 log = logging.getLogger(__name__)
-
-
-def sub_config(cfg, name: str, cls: type):
-    """The localizer's own config from ``cfg``: an instance of ``cls`` as is, an EvaluateConfig's field
-    ``name`` when it has one, else ``cls()`` (until EvaluateConfig carries the field)."""
-    if cfg is None:
-        return cls()
-    if isinstance(cfg, cls):
-        return cfg
-    sub = getattr(cfg, name, None)  # transitional: EvaluateConfig may not have the field yet
-    return sub if isinstance(sub, cls) else cls()
-
-
-# --------------------------------------------------------------------------- device model helpers
-def to_map_units(k: np.ndarray | float, b: np.ndarray | float, device_model: str) -> tuple:
-    """(k', b') with map-unit signal u = k' φ + b' for a device model [k, b] of the given direction."""
-    k = np.asarray(k, dtype=float)
-    b = np.asarray(b, dtype=float)
-    if device_model == "device":
-        return 1.0 / k, -b / k
-    return k, b
-
-
-def calibrate_rss(rss_dbm: np.ndarray, k: float, b: float, device_model: str = "device") -> np.ndarray:
-    """Scan RSSI (n, L) dBm mapped into the map's units by a known device model (NaN stays NaN)."""
-    kp, bp = to_map_units(k, b, device_model)
-    return (kp * np.asarray(rss_dbm, dtype=np.float64) + bp).astype(np.float32)
-
-
-def calibrate_query(query: Query, k: float, b: float, device_model: str = "device") -> Query:
-    """A copy of ``query`` with every reading mapped into the map's units (see :func:`calibrate_rss`)."""
-    return Query(calibrate_rss(query.rss_dbm, k, b, device_model), query.bssids, query.t_s, query.walk_id,
-                 query.node, query.steps, dict(query.extra))
-
-
-def fit_device_model(map_dbm: np.ndarray, device_dbm: np.ndarray) -> tuple[float, float, int]:
-    """Offline linear fit (He et al. 2015, their ref. [21]) ``device = k · map + b`` from co-located readings.
-
-    ``map_dbm``, ``device_dbm``: same shape, NaN where either side has no reading. Returns (k, b, n pairs).
-    Raises InputError with fewer than 2 pairs or no spread in ``map_dbm``.
-    """
-    a = np.asarray(map_dbm, dtype=float).ravel()
-    d = np.asarray(device_dbm, dtype=float).ravel()
-    ok = np.isfinite(a) & np.isfinite(d)
-    if ok.sum() < 2 or np.ptp(a[ok]) == 0:
-        raise InputError(f"offline device fit needs >= 2 co-located readings with spread, got {int(ok.sum())}")
-    k, b = np.polyfit(a[ok], d[ok], 1)
-    return float(k), float(b), int(ok.sum())
 
 
 # --------------------------------------------------------------------------- numeric kernels
@@ -384,6 +337,7 @@ class SlacLocalizer:
                                  "'fingerprint_only' to localize it from Wi-Fi alone)")
             fallbacks.append("steps:none")
             steps = pd.DataFrame({"t_s": [], "step_length_m": [], "step_freq_hz": []})
+        assert steps is not None
         step_source = cfg.step_source
         if not no_steps and step_source == "frequency" and not np.isfinite(
                 steps["step_freq_hz"].to_numpy(dtype=float)).any():
@@ -410,8 +364,8 @@ class SlacLocalizer:
 
         # particles, in the config's direction
         p_n = cfg.n_particles
-        kp = rng.uniform(*cfg.k_range, p_n)
-        bp = rng.uniform(*cfg.b_range_db, p_n)
+        kp = rng.uniform(cfg.k_range[0], cfg.k_range[1], p_n)
+        bp = rng.uniform(cfg.b_range_db[0], cfg.b_range_db[1], p_n)
         k_span = max(cfg.k_range[1] - cfg.k_range[0], 0.0)
         b_span = max(cfg.b_range_db[1] - cfg.b_range_db[0], 0.0)
         alpha = float(np.mean(cfg.alpha_range))

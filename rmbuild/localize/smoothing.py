@@ -18,8 +18,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.localize import SmoothingConfig
-from rmbuild.localize.base import Query, checked
-from rmbuild.localize.slac import sub_config
+from rmbuild.localize.base import Query, checked, sub_config
 
 
 def pdr_positions(t_s: np.ndarray, steps: pd.DataFrame) -> np.ndarray:
@@ -32,6 +31,26 @@ def pdr_positions(t_s: np.ndarray, steps: pd.DataFrame) -> np.ndarray:
     cy = np.r_[0.0, np.cumsum(ln * np.sin(hd))]
     k = np.searchsorted(ts, t_s, side="right")
     return np.c_[cx[k], cy[k]]
+
+
+def frame_rotation(pdr: np.ndarray, fixes: np.ndarray) -> float:
+    """rad; the least-squares rotation taking a walk's PDR displacements onto its fixes' displacements.
+
+    ``pdr`` (n, 2) PDR positions (walk frame) and ``fixes`` (n, 2) map-frame positions at the same times
+    (NaN = no fix); displacements between consecutive rows with a fix. 0 with fewer than two fixes.
+    """
+    good = np.isfinite(fixes).all(axis=1)
+    if good.sum() < 2:
+        return 0.0
+    a = np.diff(pdr[good], axis=0)
+    b = np.diff(fixes[good], axis=0)
+    return float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
+
+
+def rotate(v: np.ndarray, theta: float) -> np.ndarray:
+    """(..., 2) vectors rotated by ``theta`` rad."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
 def kalman_smooth(z: np.ndarray, pdr: np.ndarray, cfg: SmoothingConfig) -> np.ndarray:
@@ -50,15 +69,7 @@ def kalman_smooth(z: np.ndarray, pdr: np.ndarray, cfg: SmoothingConfig) -> np.nd
         if x is not None:
             dp = pdr[i] - pdr[last]
             lo = max(0, i - cfg.rotation_window_scans)
-            zz, dd = z[lo:i], pdr[lo:i]
-            good = np.isfinite(zz).all(axis=1)
-            th = 0.0
-            if good.sum() >= 2:
-                a = np.diff(dd[good], axis=0)
-                b = np.diff(zz[good], axis=0)
-                th = float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
-            c, s = np.cos(th), np.sin(th)
-            x = x + np.array([c * dp[0] - s * dp[1], s * dp[0] + c * dp[1]])
+            x = x + rotate(dp, frame_rotation(pdr[lo:i], z[lo:i]))
             p = p + (cfg.process_sd_m + cfg.process_sd_per_m * float(np.hypot(*dp))) ** 2
             last = i
             xp[i], pp[i] = x, p

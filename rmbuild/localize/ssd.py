@@ -1,4 +1,4 @@
-"""SSD: signal-strength-difference fingerprints (Hossain et al. 2013; a baseline of He et al. 2015).
+"""SSD and SSR: signal-strength differences and ratios between APs (SLAC's online-calibration baselines).
 
 A fingerprint becomes its pairwise AP differences ``φ_i − φ_j``, which a device offset ``b`` does not
 change. Over the APs S shared by a scan and an RP, with the residual ``e = φ − ψ̄``::
@@ -8,7 +8,11 @@ change. Over the APs S shared by a scan and an RP, with the residual ``e = φ �
 i.e. the SSD distance is the spread of the residual around its mean. Both means come from matrix products
 with the detection indicators, so a query costs O(Q·L). Neighbours: RPs sharing at least
 ``min_shared_aps`` APs and ``min_shared_fraction`` of the scan's APs; position = mean of the K nearest.
-A gain ``k ≠ 1`` is not cancelled (SSR, the ratio variant, would cancel a gain instead of an offset).
+A gain ``k ≠ 1`` is not cancelled.
+
+**SSR** uses the ratios ``φ_i / φ_j`` of the RSSI values in dBm instead. Compared as log-ratios,
+``log(−φ_i) − log(−φ_j)``, they are the same construction on the feature ``log(−φ)``: the SSR distance is
+2 Var_S(log(−φ) − log(−ψ̄)), in which a device gain (φ = kψ) cancels exactly and an offset does not.
 """
 
 from __future__ import annotations
@@ -17,10 +21,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import SsdConfig
+from rmbuild.config.localize import SsdConfig, SsrConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked
-from rmbuild.localize.slac import sub_config
+from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
 
 _BLOCK = 512
 
@@ -29,14 +32,15 @@ class SsdLocalizer:
     """K nearest RPs by signal-strength-difference distance (offset-invariant)."""
 
     name: ClassVar[str] = "ssd"
+    config_cls: ClassVar[type] = SsdConfig
 
-    def __init__(self, cfg: SsdConfig | None = None) -> None:
-        self.cfg = checked(cfg, SsdConfig)
+    def __init__(self, cfg: SsdConfig | SsrConfig | None = None) -> None:
+        self.cfg: SsdConfig | SsrConfig = checked(cfg, self.config_cls)
         self.ref: ReferenceSet | None = None
 
     @classmethod
     def from_config(cls, cfg) -> SsdLocalizer:
-        return cls(sub_config(cfg, "ssd", SsdConfig))
+        return cls(sub_config(cfg, cls.name, cls.config_cls))
 
     def fit(self, ref) -> SsdLocalizer:
         ref = as_reference(ref, self.cfg.reference)
@@ -44,16 +48,21 @@ class SsdLocalizer:
             raise InputError("SSD: the reference set is empty")
         self.ref = ref
         det = ~np.isnan(ref.rss_dbm)
-        psi = np.where(det, ref.rss_dbm.astype(np.float64) + 70.0, 0.0)  # centred; cancels in differences
+        psi = np.where(det, self.feature(ref.rss_dbm), 0.0)
         self._B = det.astype(np.float64)
         self._P = psi
         self._P2 = psi * psi
         return self
 
+    @staticmethod
+    def feature(rss_dbm: np.ndarray) -> np.ndarray:
+        """What is differenced between APs: the RSSI, centred (the centre cancels in differences)."""
+        return np.asarray(rss_dbm, dtype=np.float64) + 70.0
+
     def distances(self, rss_dbm: np.ndarray) -> np.ndarray:
-        """(n, Q) squared SSD distance 2 Var_S(φ − ψ̄) (inf where the RP is not admissible)."""
+        """(n, Q) squared distance 2 Var_S(f(φ) − f(ψ̄)), f = :meth:`feature` (inf where not admissible)."""
         det = ~np.isnan(rss_dbm)
-        phi = np.where(det, rss_dbm.astype(np.float64) + 70.0, 0.0)
+        phi = np.where(det, self.feature(rss_dbm), 0.0)
         b = det.astype(np.float64)
         n_s = b @ self._B.T
         se = phi @ self._B.T - b @ self._P.T
@@ -88,3 +97,20 @@ class SsdLocalizer:
 
     def summary(self) -> dict:
         return {}
+
+
+#: dBm; readings are clipped to at most this before the log of SSR's feature (a reading of 0 dBm or more
+#: would have no log; real RSSI stays far below).
+_SSR_MAX_DBM = -1.0
+
+
+class SsrLocalizer(SsdLocalizer):
+    """K nearest RPs by signal-strength-ratio distance (gain-invariant)."""
+
+    name: ClassVar[str] = "ssr"
+    config_cls: ClassVar[type] = SsrConfig
+
+    @staticmethod
+    def feature(rss_dbm: np.ndarray) -> np.ndarray:
+        """log(−φ): ratios of dBm values become differences of it."""
+        return np.log(-np.minimum(np.asarray(rss_dbm, dtype=np.float64), _SSR_MAX_DBM))

@@ -23,7 +23,8 @@ import pandas as pd
 from rmbuild.config.base import to_toml
 from rmbuild.config.radiomap import MapConfig
 from rmbuild.errors import InputError
-from rmbuild.localize.base import ReferenceSet
+from rmbuild.radiomap.histogram import HistogramLayer, build_histograms, motion_directions
+from rmbuild.radiomap.reference import ReferenceSet
 from rmbuild.types import Fingerprints
 
 #: Columns of :meth:`RadioMap.cell_table`.
@@ -49,7 +50,8 @@ class RadioMap:
     T < 2 or not detected; for filled cells the fill's own uncertainty); ``detect_ratio`` float32 (0 = not
     detected); ``n_walks`` int32. ``cells``: DataFrame with :data:`CELL_COLUMNS`.
     ``nodes``: the map nodes' :class:`Fingerprints`; ``node_xy`` float64 (len(nodes), 2) their positions;
-    ``node_walk`` their walk labels.
+    ``node_walk`` their walk labels. ``histograms``: per (cell, walking direction, AP) RSS histograms of the
+    visited cells (:mod:`rmbuild.radiomap.histogram`).
     """
 
     origin_xy: np.ndarray
@@ -66,6 +68,7 @@ class RadioMap:
     node_xy: np.ndarray
     node_walk: np.ndarray
     config: MapConfig
+    histograms: HistogramLayer | None = None
 
     @property
     def n_cells(self) -> int:
@@ -170,6 +173,7 @@ class RadioMap:
             "ap_columns": dict(zip(self.wap_names(), (str(b) for b in self.bssids), strict=True)),
             "not_detected_value": UJI_NOT_DETECTED,
             "std": "unbiased (T-1 denominator); NaN/null when T = 1",
+            "histograms": None if self.histograms is None else self.histograms.sidecar(),
             "config": dataclasses.asdict(self.config),
             "config_toml": to_toml(self.config, "map"),
         }
@@ -210,6 +214,35 @@ def _unique_count(*keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, inv.reshape(-1)
 
 
+def _usable_readings(wifi: pd.DataFrame, node_xy: np.ndarray, node_walk: np.ndarray, bssids: np.ndarray | None):
+    """The readings attached to a node with a known position, of a known AP: (readings, node row, AP
+    column, bssids). Raises InputError when there are none or the input is malformed."""
+    if node_xy.ndim != 2 or node_xy.shape[1] != 2 or len(node_walk) != len(node_xy):
+        raise InputError("node_xy must be (n_nodes, 2) and node_walk (n_nodes,)")
+    if wifi is None or len(wifi) == 0:
+        raise InputError("no Wi-Fi readings to build a radio map from")
+    for col in ("node", "bssid", "rssi_dbm"):
+        if col not in wifi:
+            raise InputError(f"Wi-Fi readings lack column {col!r}")
+    node = pd.to_numeric(wifi["node"], errors="coerce").to_numpy(dtype=np.float64)
+    ok = np.isfinite(node) & (node >= 0) & (node < len(node_xy))
+    node_i = np.where(ok, node, 0).astype(np.int64)
+    ok &= np.isfinite(node_xy[node_i]).all(axis=1)
+    ok &= np.isfinite(wifi["rssi_dbm"].to_numpy(dtype=np.float64))
+    w = wifi.loc[ok]
+    node_i = node_i[ok]
+    if len(w) == 0:
+        raise InputError("no Wi-Fi reading is attached to a node with a known position")
+    if bssids is None:
+        bssids = np.array(sorted(w["bssid"].astype(str).unique()), dtype=object)
+    bssids = np.asarray(bssids, dtype=object)
+    col_i = pd.Index(bssids).get_indexer(w["bssid"].astype(str))
+    keep = col_i >= 0
+    if not keep.any():
+        raise InputError("no Wi-Fi reading of a known AP")
+    return w.loc[keep], node_i[keep], col_i[keep], bssids
+
+
 def build_radio_map(
     wifi: pd.DataFrame,
     node_xy: np.ndarray,
@@ -236,30 +269,7 @@ def build_radio_map(
         raise InputError(f"map config: {e}") from None
     node_xy = np.asarray(node_xy, dtype=np.float64)
     node_walk = np.asarray(node_walk)
-    if node_xy.ndim != 2 or node_xy.shape[1] != 2 or len(node_walk) != len(node_xy):
-        raise InputError("node_xy must be (n_nodes, 2) and node_walk (n_nodes,)")
-    if wifi is None or len(wifi) == 0:
-        raise InputError("no Wi-Fi readings to build a radio map from")
-    for col in ("node", "bssid", "rssi_dbm"):
-        if col not in wifi:
-            raise InputError(f"Wi-Fi readings lack column {col!r}")
-    node = pd.to_numeric(wifi["node"], errors="coerce").to_numpy(dtype=np.float64)
-    ok = np.isfinite(node) & (node >= 0) & (node < len(node_xy))
-    node_i = np.where(ok, node, 0).astype(np.int64)
-    ok &= np.isfinite(node_xy[node_i]).all(axis=1)
-    ok &= np.isfinite(wifi["rssi_dbm"].to_numpy(dtype=np.float64))
-    w = wifi.loc[ok]
-    node_i = node_i[ok]
-    if len(w) == 0:
-        raise InputError("no Wi-Fi reading is attached to a node with a known position")
-    if bssids is None:
-        bssids = np.array(sorted(w["bssid"].astype(str).unique()), dtype=object)
-    bssids = np.asarray(bssids, dtype=object)
-    col = pd.Index(bssids).get_indexer(w["bssid"].astype(str))
-    keep = col >= 0
-    w, node_i, col = w.loc[keep], node_i[keep], col[keep]
-    if len(w) == 0:
-        raise InputError("no Wi-Fi reading of a known AP")
+    w, node_i, col, bssids = _usable_readings(wifi, node_xy, node_walk, bssids)
     s = float(cfg.cell_size_m)
     origin = grid_origin(node_xy[np.unique(node_i)], s) if origin_xy is None else np.asarray(origin_xy, float)
     rss = w["rssi_dbm"].to_numpy(dtype=np.float64)
@@ -307,7 +317,7 @@ def build_radio_map(
     keep_c = visits >= cfg.min_scans
     if not keep_c.any():
         raise InputError(f"no grid cell has at least min_scans = {cfg.min_scans} scans")
-    cells_u, cnt, mean, std, ratio, nw = (a[keep_c] for a in (cells_u, cnt, mean, std, ratio, nw))
+    cells_u, cnt, mean, std, ratio, nw = (np.asarray(a)[keep_c] for a in (cells_u, cnt, mean, std, ratio, nw))
     cells = pd.DataFrame({
         "ix": cells_u[:, 0], "iy": cells_u[:, 1],
         "x_m": origin[0] + (cells_u[:, 0] + 0.5) * s, "y_m": origin[1] + (cells_u[:, 1] + 0.5) * s,
@@ -320,11 +330,16 @@ def build_radio_map(
         cells, cnt, mean, std, ratio, nw = fill_cells(cells, cnt, mean, std, ratio, nw, origin, s, cfg.fill)
     cells.insert(0, "cell", np.arange(len(cells), dtype=np.int64))
 
+    row_of = np.full(n_c, -1, dtype=np.int64)
+    row_of[keep_c] = np.arange(int(keep_c.sum()))
+    hc = cfg.histogram
+    hist = build_histograms(row_of[cell_r], col, rss, motion_directions(node_xy, node_walk)[node_i], hc.bin_db,
+                            hc.n_directions)
     wn = w.assign(node=node_i)
     fp = Fingerprints.from_readings(wn, bssids)
     return RadioMap(
         origin_xy=origin, cell_size_m=s, frame=cfg.frame if frame is None else frame, bssids=bssids,
         cells=cells.reset_index(drop=True), count=cnt.astype(np.int32), mean_dbm=mean.astype(np.float32),
         std_db=std.astype(np.float32), detect_ratio=ratio.astype(np.float32), n_walks=nw.astype(np.int32),
-        nodes=fp, node_xy=node_xy[fp.node], node_walk=node_walk[fp.node], config=cfg,
+        nodes=fp, node_xy=node_xy[fp.node], node_walk=node_walk[fp.node], config=cfg, histograms=hist,
     )

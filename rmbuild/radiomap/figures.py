@@ -29,7 +29,7 @@ def _draw_walls(ax, walls) -> None:
         return
     from matplotlib.collections import LineCollection
 
-    ax.add_collection(LineCollection(a.reshape(-1, 2, 2), colors="0.2", linewidths=0.8, zorder=3))
+    ax.add_collection(LineCollection(list(a.reshape(-1, 2, 2)), colors="0.2", linewidths=0.8, zorder=3))
 
 
 def _raster(rm, values: np.ndarray) -> tuple[np.ndarray, list[float]]:

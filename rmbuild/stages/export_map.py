@@ -50,6 +50,8 @@ def run(
         w.table("map.cells", rm.long_table())
         w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
         rm.wide_table("uji").to_csv(w.path("map.wide_csv"), index=False)
+        if rm.histograms is not None:
+            w.table("map.histograms", rm.histograms.long_table(rm.bssids, rm.cells))
         side = rm.sidecar()
         side["frame_info"] = info
         w.json("map.sidecar", side)
@@ -68,6 +70,11 @@ def run(
             "reference_nodes": len(rm.nodes),
             "aps": len(rm.bssids),
             "cell_size_m": cfg.cell_size_m,
+            "histograms": None if rm.histograms is None else {
+                "entries": len(rm.histograms), "bin_db": rm.histograms.bin_db,
+                "n_directions": rm.histograms.n_directions,
+                "readings_with_direction": float(rm.histograms.count[rm.histograms.sector >= 0].sum()
+                                                 / max(rm.histograms.count.sum(), 1))},
             "time_s": {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)},
         }
         w.report = report

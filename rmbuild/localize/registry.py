@@ -1,0 +1,42 @@
+"""The localizer registry: name -> implementing class and a one-line description.
+
+No heavy imports here (the CLI builds its ``--localizer`` choices and help from it); classes are imported
+only when :func:`rmbuild.localize.base.localizer_class` asks for one. Each class provides
+``from_config(cfg: EvaluateConfig)`` returning a configured, unfitted instance.
+"""
+
+from __future__ import annotations
+
+#: name -> ("module:Class", what it is). Explicit: a new localizer is one line here.
+REGISTRY: dict[str, tuple[str, str]] = {
+    "knn": ("rmbuild.localize.knn:KnnLocalizer", "FL / kNN: mean of the K RPs nearest in RSS space"),
+    "wknn": ("rmbuild.localize.knn:WeightedKnnLocalizer", "distance-weighted kNN"),
+    "nb": ("rmbuild.localize.bayes:NaiveBayesLocalizer", "naive Bayes, Gaussian kernel per AP (SmartLocator)"),
+    "ssd": ("rmbuild.localize.ssd:SsdLocalizer", "signal-strength differences between APs (offset-free)"),
+    "ssr": ("rmbuild.localize.ssd:SsrLocalizer", "signal-strength ratios between APs (gain-free)"),
+    "hist": ("rmbuild.localize.histogram:HistogramLocalizer", "RSS-histogram fingerprints, mark selection"),
+    "hist_dir": ("rmbuild.localize.histogram:DirectionHistogramLocalizer",
+                 "direction-aware RSS-histogram fingerprints (uses steps)"),
+    "mll": ("rmbuild.localize.mll:MllLocalizer", "maximum likelihood of Wi-Fi and walked distance over a window"),
+    "pfl": ("rmbuild.localize.pfl:PflLocalizer", "particle filter: PDR steps + kNN fixes"),
+    "slac": ("rmbuild.localize.slac:SlacLocalizer", "SLAC: joint localization and device/step calibration"),
+    "smartloc": ("rmbuild.localize.smartloc:SmartLocator", "SmartLocator: auto-adaptive fusion of fixes and PDR"),
+    "smartloc_static": ("rmbuild.localize.smartloc:StaticSmartLocator",
+                        "SmartLocator's static-weight fusion (the paper's comparison)"),
+    "offline_cal": ("rmbuild.localize.calibration:OfflineCalibrated",
+                    "a localizer on scans mapped by a device model k, b fitted offline"),
+    "knn_kf": ("rmbuild.localize.smoothing:KnnKalman", "kNN, Kalman-smoothed with PDR"),
+    "nb_kf": ("rmbuild.localize.smoothing:NaiveBayesKalman", "naive Bayes, Kalman-smoothed with PDR"),
+    "ssd_kf": ("rmbuild.localize.smoothing:SsdKalman", "SSD, Kalman-smoothed with PDR"),
+    "slac_kf": ("rmbuild.localize.smoothing:SlacKalman", "SLAC, Kalman-smoothed with PDR"),
+}
+
+
+def localizer_names() -> list[str]:
+    """Registered names, in registry order."""
+    return list(REGISTRY)
+
+
+def describe() -> str:
+    """"name (what it is), ..." for help texts."""
+    return "; ".join(f"{n}: {d}" for n, (_, d) in REGISTRY.items())
