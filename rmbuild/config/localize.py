@@ -136,7 +136,7 @@ class BayesConfig:
     # dB; kernel bandwidth σ of eq. 4 (Becker et al. 2015 gives none; ours). The per-RP kernel density of eq. 3 is
     # taken as N(ψ̄, σ² + σ_q²) with σ_q the RP's std when the map has it.
     kernel_sigma_db: float = 4.0
-    # dBm; a reading missing on one side counts as this value (METHOD.md §3's -110).
+    # dBm; a reading missing on one side counts as this value (Gu et al. 2017, eq. 9: -110).
     fill_dbm: float = -110.0
     # 1; position interpolated from the K most probable RPs (eq. 5; Becker et al. 2015: 3).
     k: int = 3
@@ -230,7 +230,8 @@ class SmoothingConfig:
     # scans; the rotation of the walk's PDR frame into the map frame is the least-squares angle between
     # PDR and localizer displacements over the last this many scans (causal).
     rotation_window_scans: int = 15
-    # "filter": causal Kalman filter (the subway-station paper); "rts": plus a Rauch-Tung-Striebel backward pass (offline).
+    # "filter": causal Kalman filter (the subway-station paper); "rts": plus a Rauch-Tung-Striebel
+    # backward pass (offline).
     mode: Literal["filter", "rts"] = "filter"
 
     def validate(self) -> None:

@@ -1,4 +1,4 @@
-"""SLAC: simultaneous localization and calibration (He et al. 2015; METHOD.md §8 restates its equations).
+"""SLAC: simultaneous localization and calibration (He et al. 2015).
 
 Per test walk, scans in time order. For each new scan the last ``M`` scans (the window) are localized
 jointly for every particle ``p`` = device model ``[k_p, b_p]``:

@@ -86,7 +86,7 @@ def pair_rule_stats(
     data: SimulatedData, half_window_steps: int = 10, fill_dbm: float = -110.0, far_m: float = 5.0,
     block: int = 2048,
 ) -> PairRuleStats:
-    """Seed 001's rule on scan nodes: d_med(k) = median RSS distance from k to the other scan nodes of
+    """Gu et al.'s rule on scan nodes: d_med(k) = median RSS distance from k to the other scan nodes of
     its walk within +-half_window_steps; a pair (k, q), q in another walk, when d(k, q) < d_med(k)."""
     walk, step, xy, rss = scan_fingerprints(data)
     n = len(walk)
