@@ -31,8 +31,8 @@ def test_type_and_range_errors() -> None:
     assert from_dict(IngestConfig, {"max_attach_gap_s": 3}).max_attach_gap_s == 3.0
     with pytest.raises(ConfigError, match="need 0 < scale_min <= 1 <= scale_max"):
         from_dict(SECTIONS["optimize"], {"odometry": {"scale_min": 1.2}}, "optimize")
-    with pytest.raises(ConfigError, match="scale_rounds_max must be >= 2"):
-        from_dict(SECTIONS["optimize"], {"odometry": {"scale_rounds_max": 1}}, "optimize")
+    with pytest.raises(ConfigError, match="need max_gap_s >= 0"):
+        from_dict(SECTIONS["optimize"], {"continuity": {"max_gap_s": -1.0}}, "optimize")
     with pytest.raises(ConfigError, match="unknown key 'gnc_factors'"):
         from_dict(SECTIONS["optimize"], {"solve": {"gnc_factors": [2.0]}}, "optimize")
 

@@ -80,7 +80,9 @@ def test_rounds_extend_while_the_scale_still_moves(monkeypatch):
     """Rounds beyond the first two run while the last one moved some s_w by more than SCALE_EXTEND_MOVE,
     and bring a 20 % stretch closer to its truth than the fixed two rounds."""
     ds, fp = _stretched_venue(1.2)
-    fixed = optimize(ds, fp, OptimizeConfig(odometry=OdometryConfig(scale_rounds_max=2)))
+    monkeypatch.setattr(schedule, "SCALE_ROUNDS_MAX", 2)
+    fixed = optimize(ds, fp, OptimizeConfig())
+    monkeypatch.setattr(schedule, "SCALE_ROUNDS_MAX", 8)
     monkeypatch.setattr(schedule, "SCALE_EXTEND_MOVE", 0.005)
     extended = optimize(ds, fp, OptimizeConfig())
     assert fixed.stats["scale"]["rounds"] == 2

@@ -27,16 +27,12 @@ class OdometryConfig:
     # bounds of a walk's step-length scale.
     scale_min: float = 0.7
     scale_max: float = 1.4
-    # solves with a scale round at most (2 always; more while a scale still moves by > 3 %).
-    scale_rounds_max: int = 8
 
     def validate(self) -> None:
         if self.sigma_x_m <= 0 or self.sigma_y_m <= 0 or self.mu <= 0:
             raise ValueError("odometry sigmas and mu must be > 0")
         if not 0 < self.scale_min <= 1 <= self.scale_max:
             raise ValueError("need 0 < scale_min <= 1 <= scale_max")
-        if self.scale_rounds_max < 2:
-            raise ValueError("scale_rounds_max must be >= 2")
 
 
 @dataclass(frozen=True)
@@ -50,8 +46,6 @@ class WifiConfig:
     window_steps: int = 20
     # APs a pair's two fingerprints must share.
     min_common_aps: int = 3
-    # "run_matched": nearest segments of other walks kept per segment.
-    top_k: int = 8
     # also search pairs within one walk (loop closures), checked against its own dead reckoning.
     within_walk: bool = True
     # m; eq. 10's fuzzy band: no error below d_min, a linear ramp to e_max at d_max, flat beyond. paper: 2 / 30.
@@ -65,8 +59,8 @@ class WifiConfig:
     across_ratio: float = 0.0
 
     def validate(self) -> None:
-        if self.window_steps < 2 or self.min_common_aps < 0 or self.top_k < 1:
-            raise ValueError("need window_steps >= 2, min_common_aps >= 0 and top_k >= 1")
+        if self.window_steps < 2 or self.min_common_aps < 0:
+            raise ValueError("need window_steps >= 2 and min_common_aps >= 0")
         if not 0 <= self.d_min < self.d_max:
             raise ValueError("need 0 <= d_min < d_max")
         if self.e_max <= 0 or self.omega <= 0:

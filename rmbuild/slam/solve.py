@@ -135,7 +135,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     kf = keyframes(walks, req, cfg.solve.chain_reduction)
     graph = _Graph(walks, kf, static, cfg)
     ocfg = cfg.odometry
-    sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, ocfg.scale_rounds_max)
+    sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, schedule.SCALE_ROUNDS_MAX)
     ordering = "COLAMD" if (~walks.keep).any() or len(graph.kf_idx) < METIS_MIN_POSES else "METIS"
     scale = np.ones(walks.n_walks)
     out = SolveOutcome(init_xyt, walks.raw, scale, np.zeros(walks.n_walks, bool), np.zeros(walks.n_walks, bool),

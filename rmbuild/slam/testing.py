@@ -176,3 +176,41 @@ def false_pairs(frac: float, seed: int = 0):
         return pd.concat([keep, fake], ignore_index=True)
 
     return hook
+
+
+def split_walk(ds: Dataset, walk_id: str, n_pieces: int, gap_s: float, device: str = "dS") -> Dataset:
+    """``ds`` with walk ``walk_id`` cut into ``n_pieces`` consecutive walks of one device (``device``):
+    each piece in its own dead-reckoned frame (first pose at the origin), each starting ``gap_s`` after the
+    previous one ended (later times of the walk's poses, readings and fixes are shifted). Node ids (rows
+    of the poses table), and so the fingerprints, are unchanged."""
+    from rmbuild import geometry
+
+    poses = ds.poses.copy()
+    rows = np.flatnonzero(poses["walk_id"].to_numpy() == walk_id)
+    cuts = np.array_split(rows, n_pieces)
+    walks, fixes, wifi = ds.walks.copy(), ds.fixes.copy(), ds.wifi.copy()
+    truth = ds.truth_poses.copy() if ds.truth_poses is not None else None
+    base = walks[walks["walk_id"] == walk_id].iloc[0].to_dict()
+    new_walks = []
+    for i, r in enumerate(cuts):
+        wid = f"{walk_id}_{i}"
+        t_lo, t_hi = poses.loc[r[0], "t_s"], poses.loc[r[-1], "t_s"]
+        xyt = poses.loc[r, ["x_m", "y_m", "heading_rad"]].to_numpy(float)
+        own = geometry.between(np.repeat(xyt[:1], len(r), axis=0), xyt)
+        poses.loc[r, ["x_m", "y_m", "heading_rad"]] = own
+        poses.loc[r, "walk_id"] = wid
+        poses.loc[r, "step"] = np.arange(len(r))
+        shift = i * gap_s
+        poses.loc[r, "t_s"] += shift
+        if truth is not None:
+            truth.loc[r, "walk_id"], truth.loc[r, "t_s"] = wid, truth.loc[r, "t_s"] + shift
+        for df in (fixes, wifi):
+            m = (df["walk_id"] == walk_id) & (df["t_s"] >= t_lo - 1e-9) & (df["t_s"] <= t_hi + 0.5)
+            df.loc[m, "walk_id"], df.loc[m, "t_s"] = wid, df.loc[m, "t_s"] + shift
+        new_walks.append({**base, "walk_id": wid, "device_id": device})
+    i = int(np.flatnonzero(walks["walk_id"].to_numpy() == walk_id)[0])
+    walks = pd.concat([walks.iloc[:i], pd.DataFrame(new_walks), walks.iloc[i + 1:]], ignore_index=True)
+    walks.loc[~walks["walk_id"].isin([w["walk_id"] for w in new_walks]), "device_id"] = [
+        f"other{j}" for j in range(len(walks) - n_pieces)]
+    return Dataset(walks=walks, poses=poses, wifi=wifi, fixes=fixes, truth_poses=truth, truth_aps=ds.truth_aps,
+                   venue=ds.venue)

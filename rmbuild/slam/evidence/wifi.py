@@ -47,8 +47,7 @@ CandidatesHook = Callable[[pd.DataFrame, WalkSet], pd.DataFrame]
 
 
 def search_params(cfg: WifiConfig) -> SearchParams:
-    return SearchParams(window_steps=cfg.window_steps, min_common_aps=cfg.min_common_aps, top_k=cfg.top_k,
-                        within_walk=cfg.within_walk)
+    return SearchParams(window_steps=cfg.window_steps, min_common_aps=cfg.min_common_aps, within_walk=cfg.within_walk)
 
 
 @dataclass
