@@ -47,12 +47,13 @@ def test_real_f1_walks_linked_and_placed(f1):
     ds, fp = f1
     r = optimize(ds, fp, OptimizeConfig())
     linked = set(r.walks.loc[r.walks["linked"], "walk_id"].astype(str))
-    # measured: 83 of 106 linked (60 before component merging), 23 % of them by a merge
-    assert len(linked) >= 75, len(linked)
-    assert (r.walks["placement"] == "merge").sum() >= 10
+    # measured: 88 of 106 linked (60 before component merging, 83 before session continuity), 5 by a
+    # merge and 21 joined by continuity
+    assert len(linked) >= 80, len(linked)
+    assert r.walks["placement"].isin(["merge", "continuity"]).sum() >= 10
     opt = _waypoint_errors(r.poses, ds.fixes, linked)
     raw_err = _waypoint_errors(ds.poses, ds.fixes, linked)
-    # measured: linked walks' waypoint error median 5.8 m, mean 6.9 m; raw PDR (one SE(2) fit) ~55 m
+    # measured: linked walks' waypoint error median 5.9 m, mean 7.4 m; raw PDR (one SE(2) fit) ~55 m
     assert np.median(opt) < 8.0 and opt.mean() < 9.0, (np.median(opt), opt.mean())
     assert np.median(raw_err) > 4 * np.median(opt)
 

@@ -44,7 +44,8 @@ def test_end_to_end_recovers_alignment(venue, result):
     assert (placement == "reference").sum() == 1
     assert set(placement) <= {"reference", "translation", "se2", "pair", "merge"}
     assert {"pair_search", "solve"} <= set(calls)
-    assert list(r.poses.columns) == ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]
+    assert list(r.poses.columns) == ["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad", "linked"]
+    assert r.poses["linked"].all()
     assert len(r.poses) == len(ds.poses) == len(r.initial_poses)
     assert r.stats["factors"]["odometry"] == len(ds.poses) - len(ds.walks)
     # chain reduction: one node per keyframe in the solve, each walk a chain of them

@@ -29,7 +29,7 @@ from rmbuild.slam.evidence import default_sources
 from rmbuild.slam.evidence.base import StaticFactors
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.gauge import gauge_factors, gauge_nodes
-from rmbuild.slam.placement import Placement, place
+from rmbuild.slam.placement import Placement, gather, place
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.solve import SolveOutcome
 from rmbuild.slam.solve import run as run_solves
@@ -44,7 +44,9 @@ class OptimizeResult:
     """What :func:`optimize` returns.
 
     ``poses`` / ``initial_poses``: walk_id, step, t_s, x_m, y_m, heading_rad in the common frame (the
-    reference walk's own frame, or the building frame with anchors), rows as ``dataset.poses``.
+    reference walk's own frame, or the building frame with anchors), and ``linked`` (the walk is placed in
+    that frame, by evidence or by anchors; an unlinked walk's poses are in a frame of their own), rows as
+    ``dataset.poses``.
     ``pairs``: the vicinity factors of the final solve: node_k, node_q, walk_k, walk_q, kind, rss_dist,
     common, init_dist_m, final_dist_m, final_error (eq. 10 e), in_range (d < d_max at the end), injected,
     anisotropic (an along/across factor).
@@ -119,7 +121,7 @@ def optimize(
     timing["checks"] = time.perf_counter() - t0
 
     pairs = wifi.pairs_table(final_xyt)
-    walks_df = report.walk_table(walks, placement, pairs, checks, outcome)
+    walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
     line = report.unlinked_warning(walks, walks_df, placement.reference)
     warnings += [line] if line else []
     if walks.n_walks > 1 and walks_df["linked"].sum() <= 1:
@@ -128,11 +130,13 @@ def optimize(
         log.warning(wmsg)
     timing["total"] = time.perf_counter() - t_all
     cand = wifi.candidates.assign(used=wifi.used_mask())
+    in_map = (walks_df["linked"] | walks_df["anchored"]).to_numpy()[walks.walk_of]  # placed in the map's frame
     stats = _stats(walks, placement, outcome, checks, pairs, cand, [static] + per_source, timing, warnings, cfg)
     stats["vicinity"] = {**wifi.report(), "anisotropic_pairs": int(pairs["anisotropic"].sum())}
     stats["evidence"] = {s.name: s.report() for s in sources if s is not wifi}
     return OptimizeResult(
-        poses=walks.poses_frame(dataset.poses, final_xyt), initial_poses=walks.poses_frame(dataset.poses, init_xyt),
+        poses=walks.poses_frame(dataset.poses, final_xyt).assign(linked=in_map),
+        initial_poses=walks.poses_frame(dataset.poses, init_xyt).assign(linked=in_map),
         pairs=pairs, candidates=cand, walks=walks_df, stats=stats, cost_history=outcome.cost_history,
         placement_log=pd.DataFrame(placement.log),
     )

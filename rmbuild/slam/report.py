@@ -6,23 +6,25 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.slam.checks import CheckResult
+from rmbuild.slam.evidence.base import Ties
 from rmbuild.slam.placement import Placement
-from rmbuild.slam.placement.edges import PAIR_MIN_SHARED_M
 from rmbuild.slam.problem import WalkSet, covered_m
 from rmbuild.slam.solve import SolveOutcome
+from rmbuild.slam.uncertainty import predicted_errors
 
 
 def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks: CheckResult,
-               outcome: SolveOutcome) -> pd.DataFrame:
+               outcome: SolveOutcome, final_xyt: np.ndarray, ties: Ties) -> pd.DataFrame:
     """Per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, n_partner_walks,
-    shared_path_m, world_T_walk_x_m / _y_m / _theta_rad, heading_known, extent_ratio, confidence (0-1),
-    placement, anchored, scale, scale_fitted."""
+    shared_path_m, world_T_walk_x_m / _y_m / _theta_rad, heading_known, extent_ratio, predicted_error_m
+    (:mod:`rmbuild.slam.uncertainty`; NaN for walks not placed), placement, placement_round,
+    placement_inliers, anchored, scale, scale_fitted."""
     n_walks = walks.n_walks
-    n_cross, n_in, shared, partners = _cross_pair_counts(walks, pairs)
+    n_cross, _, shared, partners = _cross_pair_counts(walks, pairs)
     linked = placement.linked & walks.keep
-    frac_in = np.where(n_cross > 0, n_in / np.maximum(n_cross, 1), 0.0)
-    conf = np.where(linked, np.clip(shared / (4 * PAIR_MIN_SHARED_M), 0, 1) * frac_in, 0.0)
-    conf[placement.reference] = 1.0 if walks.keep[placement.reference] else 0.0
+    cross = pairs[pairs["kind"] == "cross"]
+    pred = predicted_errors(walks, final_xyt, linked, cross["node_k"].to_numpy(), cross["node_q"].to_numpy(), ties,
+                            np.asarray(placement.heading_known, bool))
     T = placement.world_T_walk
     anchored = placement.anchored if placement.anchored is not None else np.zeros(n_walks, bool)
     return pd.DataFrame({
@@ -30,8 +32,11 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
         "component": placement.component.astype(np.int64), "reference": np.arange(n_walks) == placement.reference,
         "n_cross_pairs": n_cross, "n_partner_walks": partners, "shared_path_m": shared,
         "world_T_walk_x_m": T[:, 0], "world_T_walk_y_m": T[:, 1], "world_T_walk_theta_rad": T[:, 2],
-        "heading_known": placement.heading_known, "extent_ratio": checks.extent_ratio, "confidence": conf,
-        "placement": placement_labels(placement, linked, anchored), "anchored": anchored,
+        "heading_known": placement.heading_known, "extent_ratio": checks.extent_ratio, "predicted_error_m": pred,
+        "placement": placement_labels(placement, linked, anchored),
+        "placement_round": placement.round_placed if placement.round_placed is not None else np.full(n_walks, -1),
+        "placement_inliers": placement.n_inliers if placement.n_inliers is not None else np.zeros(n_walks, int),
+        "anchored": anchored,
         "scale": outcome.scale, "scale_fitted": outcome.scale_fitted,
     })
 

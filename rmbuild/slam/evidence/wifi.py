@@ -91,7 +91,8 @@ class WifiSource(EvidenceSource):
         self.n_searched = len(self.candidates)
         self.rf = calibrate(self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s,
                             cfg.min_common_aps)
-        self._cross_all = self._is_cross(self.candidates)
+        c = self.candidates[self._is_cross(self.candidates)]
+        self._links = Links(c["node_k"].to_numpy(), c["node_q"].to_numpy())  # the search's cross pairs
 
     # ------------------------------------------------------------------------------------ placement
     def _is_cross(self, cand: pd.DataFrame) -> np.ndarray:
@@ -99,8 +100,7 @@ class WifiSource(EvidenceSource):
         return w[cand["node_k"].to_numpy()] != w[cand["node_q"].to_numpy()]
 
     def links(self) -> Links:
-        c = self.candidates[self._cross_all]
-        return Links(c["node_k"].to_numpy(), c["node_q"].to_numpy())
+        return self._links
 
     def scan_locator(self) -> ScanSimilarity:
         thr = window_median(self.rss, self.meta, self.cfg.window_steps)

@@ -53,7 +53,7 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
     nk, nq, wa, wb = nk[keep], nq[keep], wa[keep], wb[keep]
     pw = np.flatnonzero(active & np.isfinite(rot_prior))
     for _ in range(iterations):
-        J, res, w = _linearise(T, nk, nq, wa, wb, col, nv, walks)
+        J, res, w = linearise(T, nk, nq, wa, wb, col, nv, walks)
         e = geometry.wrap(T[pw, 2] - rot_prior[pw]) / rot_sig[pw]
         Jp = sp.coo_matrix((1.0 / rot_sig[pw], (np.arange(len(pw)), 3 * col[pw] + 2)), shape=(len(pw), nv))
         J = sp.vstack([J, Jp]).tocsr()
@@ -78,7 +78,7 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
     return T
 
 
-def _linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
+def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
     """(J, whitened residuals, Cauchy weights) of the links' position differences."""
     pa = walks.world_xy(T, nk)
     pb = walks.world_xy(T, nq)
