@@ -23,6 +23,7 @@ import pandas as pd
 
 from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.errors import InputError
+from rmbuild.floorplan import FloorPlan
 from rmbuild.slam import report
 from rmbuild.slam.checks import check_solution
 from rmbuild.slam.evidence import default_sources
@@ -73,10 +74,12 @@ def optimize(
     anchors: pd.DataFrame | None = None,
     progress: Progress = None,
     candidates_hook: CandidatesHook | None = None,
+    floorplan: FloorPlan | None = None,
 ) -> OptimizeResult:
     """Align all walks of ``dataset`` into one frame and optimise the pose graph (module docstring).
 
-    ``anchors``: walk_id, t_s, x_m, y_m (known building-frame positions). ``candidates_hook``: a function
+    ``anchors``: walk_id, t_s, x_m, y_m (known building-frame positions). ``floorplan``: the floor's
+    walkable space; the map is then built in the plan's frame. ``candidates_hook``: a function
     applied to the Wi-Fi candidate pairs before placement (tests and benchmarks inject false pairs with
     :func:`rmbuild.slam.testing.false_pairs`). Raises :class:`InputError` for no poses, no fingerprints,
     NaN in poses, a single-step walk (with ``single_step_walks = "error"``), an unknown reference walk and
@@ -86,7 +89,7 @@ def optimize(
     timing: dict[str, float] = {}
     t_all = t0 = time.perf_counter()
     walks, warnings = WalkSet.from_dataset(dataset, fingerprints, cfg.single_step_walks, cfg.compass.default_sigma_rad)
-    sources = default_sources(walks, cfg, anchors, progress, candidates_hook)
+    sources = default_sources(walks, cfg, anchors, progress, candidates_hook, floorplan)
     wifi = sources[0]
     assert isinstance(wifi, WifiSource)
     timing["pair_search"] = time.perf_counter() - t0
@@ -169,7 +172,8 @@ def _stats(walks: WalkSet, placement: Placement, outcome: SolveOutcome, checks, 
         "walks": walks.n_walks, "poses": walks.n, "poses_solved": int(len(outcome.keyframes)),
         "fingerprints": len(walks.fingerprints), "candidates": len(cand), "candidates_cross": int(cross.sum()),
         "walk_pairs_tested": placement.edge_fits[0], "walk_pairs_accepted": placement.edge_fits[1],
-        "reference_walk": walks.walk_ids[placement.reference], "linked_walks": int((placement.linked & keep).sum()),
+        "reference_walk": walks.walk_ids[placement.reference], "frame": placement.frame,
+        "linked_walks": int((placement.linked & keep).sum()),
         "anchored_only_walks": int((placement.anchored & ~placement.linked).sum()),
         "components": int(placement.component.max() + 1) if walks.n_walks else 0,
         "initial_cost": outcome.initial_cost, "final_cost": outcome.final_cost,

@@ -144,7 +144,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     values = graph.to_values(init_xyt)
     current = init_xyt
     while True:
-        state = SolveState(current, settling.copy(), placement)
+        state = SolveState(current, settling.copy(), placement, graph.kf_idx)
         out.settling_used = state.settling
         g = graph.build([f for s in sources for f in s.factors(state)])
         if out.first_solve_initial_cost is None:
@@ -154,7 +154,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
         sched.solved()
         out.iterations += it
         current = graph.from_values(values)
-        done = SolveState(current, settling, placement)
+        done = SolveState(current, settling, placement, graph.kf_idx)
         updates = [s.update(done) for s in sources]
         if sched.scale_round_due():
             restart, settling = _scale_round(walks, placement, sources, graph, sched, out, current, scale)
@@ -166,7 +166,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
             break
     out.poses, out.raw_scaled, out.solves, out.scale_rounds = current, graph.raw_s, sched.solves, sched.rounds
     out.n_odometry = graph.n_odo
-    final_state = SolveState(current, out.settling_used, placement)
+    final_state = SolveState(current, out.settling_used, placement, graph.kf_idx)
     final = graph.build([f for s in sources for f in s.final_factors(final_state)])
     out.final_cost = float(final.error(values))
     out.initial_cost = float(final.error(graph.to_values(init_xyt)))

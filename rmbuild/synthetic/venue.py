@@ -286,3 +286,23 @@ def build_venue(cfg: VenueConfig, rng: np.random.Generator) -> Venue:
         wall_kind=np.array(kind, dtype=object), rooms=rooms, corridors=corridors, hall=hall, kiosks=kiosks,
         nav_xy=nav_xy, nav_kind=nav_kind, nav_edges=edges, landmark_xy=landmark_xy, landmark_labels=labels,
     )
+
+
+def plan_geojson(venue: dict) -> dict:
+    """The floor plan of a venue (:meth:`Venue.to_dict`) as a GeoJSON FeatureCollection in local metres, as
+    a venue operator would draw it: the bounds as the floor outline, the corridors and the hall as
+    ``"walkable": true`` polygons, the rooms (offices, shops: walked into now and then) and the kiosks as
+    units cut out of the walkable space."""
+
+    def rect(r, **props) -> dict:
+        x0, y0, x1, y1 = (round(float(v), 6) for v in r)
+        ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+        return {"type": "Feature", "properties": props, "geometry": {"type": "Polygon", "coordinates": [ring]}}
+
+    feats = [rect(venue["bounds"], type="floor")]
+    feats += [rect(c, walkable=True, kind="corridor") for c in venue["corridors"]]
+    if venue.get("hall") is not None:
+        feats.append(rect(venue["hall"], walkable=True, kind="hall"))
+    feats += [rect(r["rect"], kind="room") for r in venue["rooms"]]
+    feats += [rect(k, kind="kiosk") for k in venue.get("kiosks", [])]
+    return {"type": "FeatureCollection", "features": feats}

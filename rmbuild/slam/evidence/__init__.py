@@ -5,23 +5,31 @@ from __future__ import annotations
 import pandas as pd
 
 from rmbuild.config.optimize import OptimizeConfig
+from rmbuild.floorplan import FloorPlan
 from rmbuild.slam.evidence.anchors import AnchorSource
 from rmbuild.slam.evidence.base import EvidenceSource
 from rmbuild.slam.evidence.compass import CompassSource
 from rmbuild.slam.evidence.continuity import ContinuitySource
+from rmbuild.slam.evidence.floorplan import FloorPlanSource
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.problem import WalkSet
 
-__all__ = ["AnchorSource", "CompassSource", "ContinuitySource", "EvidenceSource", "WifiSource", "default_sources"]
+__all__ = ["AnchorSource", "CompassSource", "ContinuitySource", "EvidenceSource", "FloorPlanSource", "WifiSource",
+           "default_sources"]
 
 
 def default_sources(walks: WalkSet, cfg: OptimizeConfig, anchors: pd.DataFrame | None = None, progress=None,
-                    candidates_hook: CandidatesHook | None = None) -> list[EvidenceSource]:
-    """The sources every run uses, in the order their links and static factors are gathered."""
+                    candidates_hook: CandidatesHook | None = None, floorplan: FloorPlan | None = None
+                    ) -> list[EvidenceSource]:
+    """The sources of a run, in the order their links and static factors are gathered (a floor plan only
+    when one is given)."""
     wifi = WifiSource(walks, cfg.wifi, progress, candidates_hook)
+    compass = CompassSource(walks, cfg.compass)
+    plan = [FloorPlanSource(walks, floorplan, compass.rotation_priors())] if floorplan is not None else []
     return [
         wifi,
         ContinuitySource(walks, cfg.continuity, wifi.rf, wifi.rss, walks.fingerprints.node),
+        *plan,
         AnchorSource(walks, anchors, cfg.anchors),
-        CompassSource(walks, cfg.compass),
+        compass,
     ]

@@ -62,7 +62,9 @@ class AnchorSource(EvidenceSource):
             if c == 0:
                 th_ref = float(Tc[2])
             T[walks_c] = geometry.compose(Tc, T[walks_c])
-        placement.frame_rotation = th_ref if len(self.nodes) else 0.0
+        if len(self.nodes):
+            placement.frame_rotation += th_ref
+            placement.frame = "anchors"
         placement.gauge_full, placement.gauge_rotation_only = full, rot_only
         placement.anchored = anchored & walks.keep
         placement.n_anchors = len(self.nodes)

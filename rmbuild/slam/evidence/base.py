@@ -75,11 +75,13 @@ class RotationPriors:
 @dataclass
 class SolveState:
     """What a source sees at a solve: the current poses (n, 3) in the common frame, the walks whose
-    step-length scale is still settling (n_walks,) bool, and the placement (walk frames, components)."""
+    step-length scale is still settling (n_walks,) bool, the placement (walk frames, components) and the
+    nodes the solve keeps (its keyframes; factors may only touch those or the source's required nodes)."""
 
     poses: np.ndarray
     settling: np.ndarray
     placement: Any
+    keyframes: np.ndarray | None = None
 
 
 @dataclass

@@ -63,7 +63,8 @@ class Placement:
     ("seed", "translation", "se2", "pair", "merge", ""); ``links`` (node_k, node_q) scan links the kNN
     rounds placed walks with, or None; ``gate_m`` the distance (m) within which a correspondence is
     consistent with this placement, None when the placement verified nothing (every walk at the origin).
-    Anchors set ``frame_rotation`` (rad, applied to the reference frame), ``gauge_full`` /
+    ``frame`` names the map's frame ("reference walk", "floorplan", "anchors"). Anchors and a floor plan
+    set ``frame_rotation`` (rad, applied to the reference frame); anchors set ``gauge_full`` /
     ``gauge_rotation_only`` (component roots that need a full / rotation-only gauge prior) and
     ``anchored``; without anchors each component's root gets a full gauge prior.
     ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
@@ -79,6 +80,7 @@ class Placement:
     links: tuple[np.ndarray, np.ndarray] | None = None
     gate_m: float | None = None
     frame_rotation: float = 0.0
+    frame: str = "reference walk"
     gauge_full: list[int] = field(default_factory=list)
     gauge_rotation_only: list[int] = field(default_factory=list)
     anchored: np.ndarray | None = None

@@ -1,0 +1,192 @@
+"""A floor plan: where people can walk, in the floor's own metric frame (no I/O; shapely for geometry).
+
+A plan is the walkable space of one floor as polygons in local metres (x east, y north, the frame the map
+is built in when a plan is given), optionally with the lon/lat of that frame (:class:`Georef`). It comes from
+GeoJSON: either walkable units, or a floor outline whose other features (shops, rooms, obstacles) are cut
+out of it. For fast look-ups it is rasterised into a signed distance field (metres to the walkable
+boundary, negative inside).
+
+GeoJSON in WGS84 is projected to local metres; the MS ILC 2.0 floors give their waypoints in metres over the
+plan's bounding box instead (``floor_info.json``: width, height), so :func:`from_ilc` projects with Web
+Mercator (EPSG:3857) and scales the outline's bounding box onto width × height.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy import ndimage
+
+# m; cell of the distance field
+FIELD_RESOLUTION_M = 0.5
+# m; the field extends this far beyond the plan
+FIELD_MARGIN_M = 20.0
+
+
+@dataclass(frozen=True)
+class Georef:
+    """How the plan's metric frame maps to WGS84: ``kind`` "enu" (east/north metres about lon0, lat0) or
+    "ilc" (Web Mercator over the lon/lat bounding box ``bbox`` = (lon_min, lat_min, lon_max, lat_max) scaled
+    onto ``size_m`` = (width, height))."""
+
+    kind: str
+    lon0: float = 0.0
+    lat0: float = 0.0
+    bbox: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    size_m: tuple[float, float] = (0.0, 0.0)
+
+    def to_lonlat(self, xy: np.ndarray) -> np.ndarray:
+        """(n, 2) lon/lat (deg) of local points (n, 2) [m]."""
+        from pyproj import Transformer
+
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if self.kind == "ilc":
+            x0, y0, x1, y1 = _mercator_bbox(self.bbox)
+            mx = x0 + xy[:, 0] / self.size_m[0] * (x1 - x0)
+            my = y0 + xy[:, 1] / self.size_m[1] * (y1 - y0)
+            lon, lat = Transformer.from_crs("EPSG:3857", "EPSG:4326", always_xy=True).transform(mx, my)
+            return np.c_[lon, lat]
+        t = Transformer.from_pipeline(_enu_pipeline(self.lon0, self.lat0))
+        lon, lat, _ = t.transform(xy[:, 0], xy[:, 1], np.zeros(len(xy)), direction="INVERSE")
+        return np.c_[lon, lat]
+
+
+@dataclass
+class FloorPlan:
+    """Walkable space (shapely geometry, local metres), the floor outline, the obstacles cut out of it,
+    the georeference (None for a plan given in local metres) and a name."""
+
+    walkable: shapely.Geometry
+    outline: shapely.Geometry
+    obstacles: list = field(default_factory=list)
+    georef: Georef | None = None
+    name: str = ""
+    _field: tuple | None = field(default=None, repr=False)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        return tuple(self.outline.bounds)  # type: ignore[return-value]
+
+    @property
+    def area_m2(self) -> float:
+        return float(self.walkable.area)
+
+    def inside(self, xy: np.ndarray, tolerance_m: float = 0.0) -> np.ndarray:
+        """bool (n,): points (n, 2) in walkable space (within ``tolerance_m`` of it)."""
+        return self.distance(xy) <= tolerance_m
+
+    def distance(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) signed distance (m) of points (n, 2) to the walkable boundary, negative inside; bilinear in
+        the distance field, clamped to the field's edge outside it."""
+        grid, (ox, oy), res = self.distance_field()
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        c = (xy[:, 0] - ox) / res
+        r = (xy[:, 1] - oy) / res
+        return ndimage.map_coordinates(grid, [r, c], order=1, mode="nearest")
+
+    def distance_field(self) -> tuple[np.ndarray, tuple[float, float], float]:
+        """(grid (rows, cols) signed distance [m], origin (x, y) of cell (0, 0), resolution [m])."""
+        if self._field is None:
+            self._field = _signed_distance(self.walkable, self.bounds, FIELD_RESOLUTION_M, FIELD_MARGIN_M)
+        return self._field
+
+
+def from_features(features: list[dict], to_local, name: str = "") -> FloorPlan:
+    """A plan from GeoJSON features (properties decide each polygon's role):
+
+    - ``"walkable": true`` polygons, when there are any, make the walkable space, and every other polygon
+      except the floor outline is an obstacle cut out of it;
+    - otherwise the floor outline (the polygon with ``"type": "floor"``, else the first one) is walkable
+      and every other polygon (shops, rooms, obstacles) is cut out of it.
+
+    ``to_local``: maps an (n, 2) array of the GeoJSON's coordinates to local metres.
+    """
+    polys = [(f.get("properties") or {}, _polygon(f["geometry"], to_local)) for f in features if f.get("geometry")
+             and f["geometry"]["type"] in ("Polygon", "MultiPolygon")]
+    if not polys:
+        raise ValueError("no Polygon or MultiPolygon features")
+    floor_i = next((i for i, (p, _) in enumerate(polys) if p.get("type") == "floor"), None)
+    walkable = [g for p, g in polys if p.get("walkable") is True]
+    if walkable:
+        obstacles = [g for i, (p, g) in enumerate(polys) if p.get("walkable") is not True and i != floor_i]
+        area = shapely.union_all(walkable)
+        outline = shapely.union_all([area] + ([polys[floor_i][1]] if floor_i is not None else []))
+    else:
+        floor_i = floor_i if floor_i is not None else 0
+        obstacles = [g for i, (_, g) in enumerate(polys) if i != floor_i]
+        area = outline = polys[floor_i][1]
+    w = shapely.difference(area, shapely.union_all(obstacles)) if obstacles else area
+    return FloorPlan(shapely.make_valid(w), outline, obstacles, None, name)
+
+
+def from_ilc(geojson: dict, width_m: float, height_m: float, name: str = "") -> FloorPlan:
+    """An MS ILC 2.0 floor: lon/lat in Web Mercator, the outline's bounding box scaled onto width × height."""
+    feats = geojson["features"]
+    outline = _polygon(feats[0]["geometry"], lambda a: a)
+    b = [float(v) for v in outline.bounds]
+    bbox = (b[0], b[1], b[2], b[3])
+    ref = Georef("ilc", bbox=bbox, size_m=(float(width_m), float(height_m)))
+    x0, y0, x1, y1 = _mercator_bbox(bbox)
+
+    def to_local(lonlat: np.ndarray) -> np.ndarray:
+        from pyproj import Transformer
+
+        mx, my = Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True).transform(lonlat[:, 0], lonlat[:, 1])
+        return np.c_[(np.asarray(mx) - x0) / (x1 - x0) * width_m, (np.asarray(my) - y0) / (y1 - y0) * height_m]
+
+    plan = from_features([{**feats[0], "properties": {**(feats[0].get("properties") or {}), "type": "floor"}},
+                          *feats[1:]], to_local, name)
+    return FloorPlan(plan.walkable, plan.outline, plan.obstacles, ref, name)
+
+
+def lonlat_to_enu(lon0: float, lat0: float):
+    """A function (n, 2) lon/lat -> (n, 2) east/north metres about (lon0, lat0) on the WGS84 ellipsoid."""
+    from pyproj import Transformer
+
+    t = Transformer.from_pipeline(_enu_pipeline(lon0, lat0))
+
+    def f(lonlat: np.ndarray) -> np.ndarray:
+        e, n, _ = t.transform(lonlat[:, 0], lonlat[:, 1], np.zeros(len(lonlat)))
+        return np.c_[e, n]
+
+    return f
+
+
+def _enu_pipeline(lon0: float, lat0: float) -> str:
+    return (f"+proj=pipeline +step +proj=cart +ellps=WGS84 "
+            f"+step +proj=topocentric +ellps=WGS84 +lon_0={lon0} +lat_0={lat0} +h_0=0")
+
+
+def _mercator_bbox(bbox: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    from pyproj import Transformer
+
+    t = Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True)
+    x0, y0 = t.transform(bbox[0], bbox[1])
+    x1, y1 = t.transform(bbox[2], bbox[3])
+    return float(x0), float(y0), float(x1), float(y1)
+
+
+def _polygon(geom: dict, to_local) -> shapely.Geometry:
+    """A shapely (Multi)Polygon in local metres from a GeoJSON geometry dict."""
+    rings = geom["coordinates"] if geom["type"] == "MultiPolygon" else [geom["coordinates"]]
+    polys = []
+    for poly in rings:
+        shell, *holes = [np.asarray(to_local(np.asarray(r, float)[:, :2])) for r in poly]
+        polys.append(shapely.Polygon(shell, holes))
+    return shapely.make_valid(shapely.MultiPolygon(polys) if len(polys) > 1 else polys[0])
+
+
+def _signed_distance(walkable, bounds, res: float, margin: float):
+    """Signed distance field of ``walkable`` over ``bounds`` + margin (negative inside), via the Euclidean
+    distance transform of its rasterised mask."""
+    x0, y0, x1, y1 = bounds
+    ox, oy = x0 - margin, y0 - margin
+    nc, nr = int(np.ceil((x1 - x0 + 2 * margin) / res)) + 1, int(np.ceil((y1 - y0 + 2 * margin) / res)) + 1
+    xs, ys = ox + res * np.arange(nc), oy + res * np.arange(nr)
+    gx, gy = np.meshgrid(xs, ys)
+    mask = shapely.contains_xy(walkable, gx.ravel(), gy.ravel()).reshape(nr, nc)
+    outside = ndimage.distance_transform_edt(~mask) * res
+    inside = ndimage.distance_transform_edt(mask) * res
+    return np.where(mask, -inside, outside), (ox, oy), res

@@ -1,0 +1,76 @@
+"""Floor plans (rmbuild/floorplan.py) and the plan as evidence (rmbuild/slam/evidence/floorplan.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from rmbuild.floorplan import from_features, from_ilc
+from tests.conftest import SHARED_DATASETS
+
+
+def _rect(x0, y0, x1, y1, **props):
+    ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+    return {"type": "Feature", "properties": props, "geometry": {"type": "Polygon", "coordinates": [ring]}}
+
+
+def test_walkable_space_from_features():
+    # an outline with a shop cut out, and the same floor given as walkable corridors instead
+    cut = from_features([_rect(0, 0, 20, 10, type="floor"), _rect(5, 2, 15, 8, kind="shop")], lambda a: a)
+    assert cut.area_m2 == pytest.approx(200 - 60) and cut.bounds == (0, 0, 20, 10)
+    corr = from_features([_rect(0, 0, 20, 10, type="floor"), _rect(0, 0, 20, 2, walkable=True),
+                          _rect(0, 8, 20, 10, walkable=True), _rect(8, 0, 10, 10, walkable=True),
+                          _rect(8.5, 4, 9.5, 6, kind="pillar")], lambda a: a)
+    assert corr.area_m2 == pytest.approx(40 + 40 + 12 - 2)
+    d = corr.distance(np.array([[9.0, 1.0], [5.0, 5.0], [9.0, 5.0], [30.0, 5.0]]))
+    assert d[0] < 0 and d[1] == pytest.approx(3.0, abs=0.5) and d[2] > 0 and d[3] > 9
+    assert list(corr.inside(np.array([[9.0, 1.0], [5.0, 5.0]]))) == [True, False]
+    with pytest.raises(ValueError):
+        from_features([{"type": "Feature", "geometry": {"type": "Point", "coordinates": [0, 0]}}], lambda a: a)
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("floor", ["site1/F1", "site2/B1"])
+def test_ilc_plan_puts_the_waypoints_in_walkable_space(floor):
+    root = SHARED_DATASETS / "msft-ilc20" / "data" / floor
+    if not root.is_dir():
+        pytest.skip("the MS ILC 2.0 data is not present")
+    import gzip
+
+    info = json.loads((root / "floor_info.json").read_text())["map_info"]
+    plan = from_ilc(json.loads((root / "geojson_map.json").read_text()), info["width"], info["height"])
+    pts = []
+    for f in sorted((root / "path_data_files").glob("*.txt.gz"))[:15]:
+        for line in gzip.open(f, "rt"):
+            p = line.split("\t")
+            if len(p) >= 4 and p[1] == "TYPE_WAYPOINT":
+                pts.append((float(p[2]), float(p[3])))
+    d = plan.distance(np.array(pts))
+    assert len(pts) > 50 and np.mean(d <= 0.5) > 0.99  # measured: every waypoint of every floor inside
+    lonlat = plan.georef.to_lonlat(np.array([[0.0, 0.0], [info["width"], info["height"]]]))
+    assert np.allclose(lonlat[0], plan.georef.bbox[:2], atol=1e-7) and np.allclose(lonlat[1], plan.georef.bbox[2:])
+
+
+def test_the_map_lands_in_the_plans_frame():
+    """With the synthetic venue's plan the map is built in the venue's frame: no fit to truth needed."""
+    pytest.importorskip("gtsam")
+    from rmbuild.config import IngestConfig
+    from rmbuild.config.optimize import OptimizeConfig
+    from rmbuild.evaluate.trajectory import trajectory_metrics
+    from rmbuild.ingest_core import build_dataset
+    from rmbuild.io.formats.base import RawInput
+    from rmbuild.slam import optimize
+    from rmbuild.synthetic import preset_config, simulate
+    from rmbuild.synthetic.venue import plan_geojson
+
+    sd = simulate(preset_config("default", 3))
+    raw = RawInput(walks=sd.walks, poses=sd.poses, wifi=sd.wifi, fixes=sd.fixes, truth_poses=sd.truth_poses,
+                   truth_aps=sd.truth_aps)
+    ds, fp, _ = build_dataset(raw, IngestConfig())
+    plan = from_features(plan_geojson(sd.venue)["features"], lambda a: a)
+    r = optimize(ds, fp, OptimizeConfig(), floorplan=plan)
+    assert r.stats["frame"] == "floorplan" and r.stats["evidence"]["floorplan"]["inside"] > 0.8
+    # measured 0.95 m in the plan's frame (0.71 m after a fit to truth without the plan)
+    assert trajectory_metrics(r.poses, ds, align=False)["landmark_error_m"]["mean"] < 2.0
