@@ -300,7 +300,7 @@ def wifi_motion_check(poses: pd.DataFrame, wifi: pd.DataFrame, reports: dict[str
 
 def _pdr_summary(reports: dict[str, PdrReport]) -> dict:
     """The per-walk PDR table of the ingest report."""
-    return {w: {"steps": r.steps, "walking_s": r.walking_s, "duration_s": r.duration_s,
+    return {w: {"steps": r.steps, "walking_s": r.walking_s, "handling_s": r.handling_s, "duration_s": r.duration_s,
                 "cadence_hz": round(r.cadence_hz, 3) if np.isfinite(r.cadence_hz) else None,
                 "walked_m": round(r.walked_m, 2), "heading": r.heading_source,
                 "gyro_bias_dps": round(r.gyro_bias_dps, 3), "gyro_bias_from": r.bias_source,

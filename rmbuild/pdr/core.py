@@ -12,7 +12,7 @@ from rmbuild.pdr.heading import interval_mean, wrap_angle
 from rmbuild.pdr.length import step_lengths, step_swings
 from rmbuild.pdr.quality import PdrReport, assess
 from rmbuild.pdr.steps import bandpassed_magnitude, gait_windows, pick_steps
-from rmbuild.pdr.timebase import TimeIssue, dropouts, main_block, uniform_grid, within
+from rmbuild.pdr.timebase import TimeIssue, dropouts, main_block, resample, uniform_grid, within
 from rmbuild.pdr.yaw import relative_yaw
 
 #: m/s²; RMS of the band-passed acceleration magnitude below which a gait window is standing. Measured on
@@ -182,7 +182,9 @@ def run_pdr(imu: ImuSignals, cfg: PdrConfig) -> PdrResult:
     t0 = float(imu.t_acc_s[0])
     grid = uniform_grid(imu.t_acc_s, "acc")
     s = bandpassed_magnitude(grid, imu.t_acc_s, imu.acc_mps2)
-    det = pick_steps(grid, s, gait_windows(grid, s, MIN_WALK_RMS_MPS2), MIN_WALK_RMS_MPS2)
+    rate = (resample(grid, imu.t_gyro_s, np.linalg.norm(imu.gyro_radps, axis=1)) if len(imu.t_gyro_s) >= 2
+            else None)
+    det = pick_steps(grid, s, gait_windows(grid, s, MIN_WALK_RMS_MPS2, rate), MIN_WALK_RMS_MPS2)
     step_t, period = det.t_s, det.period_s
     k = len(step_t)
     w0, w1 = step_t + HEADING_WINDOW_PERIODS[0] * period, step_t + HEADING_WINDOW_PERIODS[1] * period

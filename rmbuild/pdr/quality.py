@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from rmbuild.pdr.steps import HOP_S
 from rmbuild.pdr.timebase import TimeIssue
 
 if TYPE_CHECKING:
@@ -23,7 +24,8 @@ MIN_JUDGED_S = 10.0
 
 @dataclass
 class PdrReport:
-    """Per-walk PDR summary: ``steps``; ``walking_s`` and ``duration_s`` (s); ``cadence_hz`` steps per walking
+    """Per-walk PDR summary: ``steps``; ``walking_s``, ``handling_s`` (the phone handled, not carried: no
+    steps counted) and ``duration_s`` (s); ``cadence_hz`` steps per walking
     second (NaN without walking); ``walked_m`` summed step length; ``heading_source``; ``gyro_bias_dps``
     (norm of the removed bias, °/s) and ``bias_source``; ``quality``
     "ok", "suspect" or "poor"; ``warnings`` (text); ``time_issues`` (repaired timestamp problems, located
@@ -31,6 +33,7 @@ class PdrReport:
 
     steps: int
     walking_s: float
+    handling_s: float
     duration_s: float
     cadence_hz: float
     walked_m: float
@@ -48,7 +51,9 @@ def assess(poses: StepPoses, det: StepDetection, yaw: YawTrack, issues: list[Tim
     k = len(det.t_s)
     cad = k / det.walking_s if det.walking_s > 0 else float("nan")
     rep = PdrReport(
-        steps=k, walking_s=round(det.walking_s, 2), duration_s=round(duration_s, 2), cadence_hz=cad,
+        steps=k, walking_s=round(det.walking_s, 2),
+        handling_s=round(float(det.windows.handling.sum()) * HOP_S, 1), duration_s=round(duration_s, 2),
+        cadence_hz=cad,
         walked_m=float(np.sum(poses.step_length_m)), heading_source=yaw.source,
         gyro_bias_dps=float(np.degrees(np.linalg.norm(yaw.bias_radps))), bias_source=yaw.bias_source,
         time_issues=list(issues),

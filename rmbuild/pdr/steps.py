@@ -43,9 +43,14 @@ MIN_STEP_FRACTION = 0.6
 #: a peak needs a prominence of this multiple of its window's RMS of the band-passed magnitude (a sine has
 #: 2.8; chosen on the ILC 2.0 and IPIN 2023 walks and the synthetic carrying modes, docs/formats-real.md)
 MIN_PROMINENCE_RMS = 1.5
-#: a window's RMS clips the band-passed magnitude at this many times its median absolute value (a sine's
-#: peak is 1.4 times it, heel-strike peaks 2-3 times)
-CLIP_MEDIANS = 3.0
+#: rad/s; RMS rotation rate above which a window is the phone being handled, not carried: a phone swinging
+#: in a walker's hand turns at up to ~3.5 rad/s RMS; the IPIN 2023 walks' compass calibration (waving the
+#: phone for their first minute) at 3-7 rad/s (median 3.2), walking after it at <= 1.4; ILC 2.0 <= 2.8
+HANDLING_RATE_RADPS = 4.0
+#: a window's RMS and autocorrelation clip the band-passed magnitude at this many times its median absolute
+#: value (a sine's peak is 1.4 times it, heel strikes 2-4 times; 3 cost 0.04 m on ILC F1, 5 about 0.01 m:
+#: docs/formats-real.md)
+CLIP_MEDIANS = 5.0
 #: s; a grid point is moving when the RMS over this window reaches LOCAL_RMS_FRACTION of its gait window's
 #: RMS (a walker who stops for a second inside a walking window is standing there)
 LOCAL_RMS_S = 1.0
@@ -55,13 +60,15 @@ LOCAL_RMS_FRACTION = 0.5
 @dataclass(frozen=True)
 class GaitWindows:
     """Per gait window (w,): centre time ``t_s``, ``walking`` flag, ``period_s`` step period (NaN when not
-    walking), ``rms_mps2`` of the band-passed magnitude, ``periodicity`` (autocorrelation at the period)."""
+    walking), ``rms_mps2`` of the band-passed magnitude, ``periodicity`` (autocorrelation at the period),
+    ``handling`` (the phone turning too fast to be carried by a walker)."""
 
     t_s: np.ndarray
     walking: np.ndarray
     period_s: np.ndarray
     rms_mps2: np.ndarray
     periodicity: np.ndarray
+    handling: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -129,30 +136,28 @@ def _period(r: np.ndarray, fs: float) -> tuple[float, float]:
 
 
 def _clip(frames: np.ndarray) -> np.ndarray:
-    """Each row clipped at ± CLIP_MEDIANS times its median absolute value: a gait's waveform, without a
-    single knock of the phone (which would otherwise dominate a whole window's RMS and autocorrelation and
-    hide its steps)."""
+    """Each row clipped at ± CLIP_MEDIANS times its median absolute value: a gait's waveform without the one
+    jolt of a turn on the spot or a knock (which would otherwise dominate a whole window's RMS and
+    autocorrelation and hide the steps around it)."""
     cap = CLIP_MEDIANS * np.median(np.abs(frames), axis=1, keepdims=True)
     return np.clip(frames, -cap, cap)
 
 
-def _robust_rms(frames: np.ndarray) -> np.ndarray:
-    """(w,) RMS of each row after :func:`_clip`."""
-    return np.sqrt(np.mean(_clip(frames) ** 2, axis=1))
-
-
-def gait_windows(grid: Grid, s: np.ndarray, min_rms_mps2: float) -> GaitWindows:
+def gait_windows(grid: Grid, s: np.ndarray, min_rms_mps2: float, rate_radps: np.ndarray | None = None,
+                 ) -> GaitWindows:
     """Walking flag, step period and intensity of overlapping windows over each run of ``s`` (on ``grid``).
 
     ``min_rms_mps2``: RMS of the band-passed magnitude below which a window is standing (sensor noise and
-    hand tremor stay well below it).
+    hand tremor stay well below it). ``rate_radps``: the gyro's rotation rate magnitude on the grid, when
+    there is a gyro: a window turning faster than :data:`HANDLING_RATE_RADPS` (RMS) is the phone being
+    handled (waved to calibrate the compass, picked up, shaken), not walked with, whatever its rhythm.
     """
     from numpy.lib.stride_tricks import sliding_window_view
 
     fs = grid.fs_hz
     n_win, hop = int(round(WINDOW_S * fs)), max(int(round(HOP_S * fs)), 1)
     max_lag = int(round(MAX_LAG_S * fs)) + 1
-    t_c, per, rho, rms = [], [], [], []
+    t_c, per, rho, rms, rot = [], [], [], [], []
     for r in grid.runs():
         x = s[r]
         if len(x) < max(int(1.5 * fs), 8):
@@ -162,20 +167,24 @@ def gait_windows(grid: Grid, s: np.ndarray, min_rms_mps2: float) -> GaitWindows:
         if starts[-1] != len(x) - w:
             starts = np.r_[starts, len(x) - w]
         frames = sliding_window_view(x, w)[starts]
-        ac = _acf(_clip(frames), min(max_lag, w - 2))
+        frames = _clip(frames)
+        ac = _acf(frames, min(max_lag, w - 2))
         for k in range(len(starts)):
             p, q = _period(ac[k], fs)
             per.append(p)
             rho.append(q)
-        rms.append(_robust_rms(frames))
+        rms.append(np.sqrt(np.mean(frames**2, axis=1)))
         t_c.append(grid.t_s[r][starts + w // 2])
+        if rate_radps is not None:
+            rot.append(np.sqrt(np.mean(sliding_window_view(rate_radps[r], w)[starts] ** 2, axis=1)))
     if not t_c:
         z = np.zeros(0)
-        return GaitWindows(z, np.zeros(0, dtype=bool), z, z, z)
+        return GaitWindows(z, np.zeros(0, dtype=bool), z, z, z, np.zeros(0, dtype=bool))
     t_c_a, rms_a = np.concatenate(t_c), np.concatenate(rms)
     per_a, rho_a = np.asarray(per), np.asarray(rho)
-    walking = np.isfinite(per_a) & (rho_a >= MIN_PERIODICITY) & (rms_a >= min_rms_mps2)
-    return GaitWindows(t_c_a, walking, np.where(walking, per_a, np.nan), rms_a, rho_a)
+    handling = np.concatenate(rot) > HANDLING_RATE_RADPS if rot else np.zeros(len(t_c_a), dtype=bool)
+    walking = np.isfinite(per_a) & (rho_a >= MIN_PERIODICITY) & (rms_a >= min_rms_mps2) & ~handling
+    return GaitWindows(t_c_a, walking, np.where(walking, per_a, np.nan), rms_a, rho_a, handling)
 
 
 def _local_rms(grid: Grid, s: np.ndarray) -> np.ndarray:
@@ -198,15 +207,21 @@ def _walking_on_grid(grid: Grid, s: np.ndarray, win: GaitWindows, min_rms_mps2: 
     if not win.walking.any():
         return np.zeros(m, dtype=bool), np.full(m, np.nan), np.full(m, np.nan)
     tw, pw, rw = win.t_s[win.walking], win.period_s[win.walking], win.rms_mps2[win.walking]
-    j = np.clip(np.searchsorted(tw, grid.t_s), 1, max(len(tw) - 1, 1))
-    if len(tw) > 1:
-        j = np.where(np.abs(grid.t_s - tw[j - 1]) <= np.abs(tw[j] - grid.t_s), j - 1, j)
-    else:
-        j = np.zeros(m, dtype=np.int64)
+    j = _nearest(tw, grid.t_s)
     local = _local_rms(grid, s)
     walking = (np.abs(grid.t_s - tw[j]) <= WINDOW_S / 2) & (local >= np.maximum(min_rms_mps2,
                                                                                  LOCAL_RMS_FRACTION * rw[j]))
+    # where the nearest window of all is one of handling, nobody is walking
+    walking &= ~win.handling[_nearest(win.t_s, grid.t_s)]
     return walking, pw[j], rw[j]
+
+
+def _nearest(sorted_t: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Index into ``sorted_t`` (non-empty) of the value nearest to each of ``t``."""
+    if len(sorted_t) == 1:
+        return np.zeros(len(t), dtype=np.int64)
+    j = np.clip(np.searchsorted(sorted_t, t), 1, len(sorted_t) - 1)
+    return np.where(np.abs(t - sorted_t[j - 1]) <= np.abs(sorted_t[j] - t), j - 1, j)
 
 
 def pick_steps(grid: Grid, s: np.ndarray, win: GaitWindows, min_rms_mps2: float) -> StepDetection:
@@ -245,8 +260,10 @@ def _cat(parts: list[np.ndarray], dtype: type) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
 
 
-def detect_steps(grid: Grid, t_s: np.ndarray, acc_mps2: np.ndarray, min_rms_mps2: float) -> StepDetection:
-    """Steps of one walk's accelerometer ``acc_mps2`` (n, 3) at times ``t_s`` (n,), on ``grid``."""
+def detect_steps(grid: Grid, t_s: np.ndarray, acc_mps2: np.ndarray, min_rms_mps2: float,
+                 rate_radps: np.ndarray | None = None) -> StepDetection:
+    """Steps of one walk's accelerometer ``acc_mps2`` (n, 3) at times ``t_s`` (n,), on ``grid``
+    (``rate_radps``: the gyro's rate magnitude on the grid, or None)."""
     s = bandpassed_magnitude(grid, t_s, acc_mps2)
-    win = gait_windows(grid, s, min_rms_mps2)
+    win = gait_windows(grid, s, min_rms_mps2, rate_radps)
     return pick_steps(grid, s, win, min_rms_mps2)

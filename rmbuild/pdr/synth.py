@@ -34,8 +34,10 @@ FINE_HZ = 400.0
 PAUSE_GAP_S = 1.5
 #: s; the turn at the end of a pause takes this long
 TURN_S = 1.5
-#: s; a walking stretch's swing builds up over RAMP_IN_S from its first step and dies out over RAMP_OUT_S
+#: s; a walking stretch's bounce builds up over RAMP_IN_S from its first step and dies out over RAMP_OUT_S
 RAMP_IN_S, RAMP_OUT_S = 1.0, 0.6
+#: s; an arm's or a thigh's swing builds up over this
+SWING_RAMP_IN_S = 1.2
 #: s; the build-up starts this long before the first step (the push-off)
 RAMP_LEAD_S = 0.3
 #: s; reported timestamps are at least this far apart
@@ -98,8 +100,9 @@ def draw_carry(mode: str, rng: np.random.Generator) -> Carry:
     raise ValueError(f"unknown carrying mode {mode!r} (known: {', '.join(CARRY_MODES)})")
 
 
-def _gait(t: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gait phase (rad, +2 pi per step, 0 at each step) and walking amplitude in [0, 1] on the grid ``t``."""
+def _gait(t: np.ndarray, st: np.ndarray, ramp_in_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gait phase (rad, +2 pi per step, 0 at each step) and walking amplitude in [0, 1] on the grid ``t``,
+    reaching 1 ``ramp_in_s`` after the start of a walking stretch."""
     i = np.searchsorted(st, t, side="right")
     prev = st[np.maximum(i - 1, 0)]
     nxt = st[np.minimum(i, len(st) - 1)]
@@ -110,12 +113,11 @@ def _gait(t: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # another cycle)
     frac = np.where(walking, (t - prev) / per, 0.0)
     phase = 2 * np.pi * (i + frac)
-    # each walking stretch ramps in over RAMP_IN_S from its first step (an arm or a leg takes a step or two
-    # to reach its full swing) and out over RAMP_OUT_S after its last
+    # each walking stretch ramps in from its first step and out over RAMP_OUT_S after its last
     brk = np.flatnonzero(np.diff(st) > PAUSE_GAP_S)
     first, last = st[np.r_[0, brk + 1]], st[np.r_[brk, len(st) - 1]]
     k = np.clip(np.searchsorted(first, t, side="right") - 1, 0, len(first) - 1)
-    rise = np.clip((t - first[k] + RAMP_LEAD_S) / RAMP_IN_S, 0.0, 1.0)
+    rise = np.clip((t - first[k] + RAMP_LEAD_S) / ramp_in_s, 0.0, 1.0)
     fall = np.clip(1.0 - (t - last[k]) / RAMP_OUT_S, 0.0, 1.0)
     smooth = lambda x: x * x * (3 - 2 * x)  # noqa: E731  (smoothstep)
     return phase, smooth(rise) * smooth(fall)
@@ -145,7 +147,8 @@ def _motion(t: np.ndarray, st: np.ndarray, hd: np.ndarray, length: np.ndarray, c
     """(n, 3, 3) device -> world rotations and (n, 3) world accelerations of the phone on the grid ``t``."""
     from scipy.spatial.transform import Rotation
 
-    phase, amp = _gait(t, st)
+    phase, amp = _gait(t, st, RAMP_IN_S)          # the body: bounce and sway
+    _, swing = _gait(t, st, SWING_RAMP_IN_S)      # an arm or a leg takes a step or two to reach its swing
     yaw = _smooth(_body_yaw(t, st, hd), 0.15) + amp * np.deg2rad(4.0) * np.sin(phase / 2)
     # horizontal path: step positions, linear in time, smoothed
     pos = np.vstack([[0.0, 0.0], np.cumsum(length[:, None] * np.c_[np.cos(hd), np.sin(hd)], axis=0)])
@@ -153,9 +156,9 @@ def _motion(t: np.ndarray, st: np.ndarray, hd: np.ndarray, length: np.ndarray, c
     ph = _smooth(np.column_stack([np.interp(t, kt, pos[:, j]) for j in range(2)]), 0.08)
     excursion = leg_m - np.sqrt(leg_m**2 - (np.interp(t, st, length) / 2) ** 2)
     z = -0.5 * bounce_scale * excursion * amp * carry.damping * np.cos(phase)
-    theta = amp * carry.swing_rad * np.sin(phase / 2)
+    theta = swing * carry.swing_rad * np.sin(phase / 2)
     if carry.mode == "pocket":   # the thigh swings forward faster than back
-        theta = theta + amp * 0.3 * carry.swing_rad * np.sin(phase + 0.5)
+        theta = theta + swing * 0.3 * carry.swing_rad * np.sin(phase + 0.5)
     wobble = amp * carry.swing_rad * np.sin(phase + 1.0) if carry.arm_m == 0 else 0.0
     r_body = Rotation.from_euler("z", yaw[:, None])
     r_swing = Rotation.from_rotvec(np.column_stack([np.zeros_like(t), theta + wobble, np.zeros_like(t)]))
