@@ -251,3 +251,22 @@ def test_config_is_strict():
         from_dict(PdrConfig, {"msft_ilc": {"max_wifi_age_s": -1}})
     with pytest.raises(ConfigError, match="max_gap_s"):
         from_dict(PdrConfig, {"max_gap_s": 1e9})
+
+
+def test_phone_waved_not_walked_counts_no_steps():
+    """20 s of waving the phone (as when calibrating the compass: periodic, but turning at 6 rad/s) before
+    a walk: no steps and no absolute yaw there, the time reported as handling."""
+    st, hd, rng = synthetic_walk(4, n_bouts=1)
+    walk = synthesize_phone_imu(st + 21.0, hd, rng, t_start_s=20.0)
+    t = np.arange(0.0, 20.0, 0.02)
+    wave = np.sin(2 * np.pi * 1.5 * t)
+    acc = np.c_[3.0 * wave, np.zeros_like(t), 9.81 + 3.0 * np.cos(2 * np.pi * 1.5 * t)]
+    gyro = np.c_[8.0 * wave, 6.0 * np.cos(2 * np.pi * 1.5 * t), np.zeros_like(t)]
+    q = np.tile(walk.quat_xyzw[:1], (len(t), 1))
+    imu = ImuSignals(np.r_[t, walk.t_acc_s], np.r_[acc, walk.acc_mps2], np.r_[t, walk.t_yaw_s],
+                     np.r_[np.zeros(len(t)), walk.yaw_abs_rad], np.r_[np.full(len(t), 3), walk.yaw_accuracy],
+                     np.r_[t, walk.t_gyro_s], np.r_[gyro, walk.gyro_radps], np.r_[q, walk.quat_xyzw])
+    res = run_pdr(imu, PdrConfig())
+    assert abs(len(res.poses) - 1 - len(st)) <= 1 and res.poses.t_s[1] > 20.0
+    assert res.report.handling_s >= 15.0 and np.isnan(res.poses.yaw_abs_rad[0])
+    assert np.isfinite(res.poses.yaw_abs_rad[5:]).all()
