@@ -258,12 +258,3 @@ def _thin(t: np.ndarray, s: np.ndarray, pk: np.ndarray, period: np.ndarray) -> n
 
 def _cat(parts: list[np.ndarray], dtype: type) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
-
-
-def detect_steps(grid: Grid, t_s: np.ndarray, acc_mps2: np.ndarray, min_rms_mps2: float,
-                 rate_radps: np.ndarray | None = None) -> StepDetection:
-    """Steps of one walk's accelerometer ``acc_mps2`` (n, 3) at times ``t_s`` (n,), on ``grid``
-    (``rate_radps``: the gyro's rate magnitude on the grid, or None)."""
-    s = bandpassed_magnitude(grid, t_s, acc_mps2)
-    win = gait_windows(grid, s, min_rms_mps2, rate_radps)
-    return pick_steps(grid, s, win, min_rms_mps2)
