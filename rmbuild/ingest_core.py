@@ -7,14 +7,38 @@ Pure: takes a :class:`RawInput` from any reader, returns the :class:`Dataset`, t
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
+from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.io.formats.base import RawInput
+from rmbuild.io.formats.base import RawImu, RawInput
+from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import FIX_COLUMNS, POSE_COLUMNS, WALK_COLUMNS, WIFI_COLUMNS, Dataset, Fingerprints
+
+#: columns ingest adds to the walks table for walks whose poses come from the phone PDR (empty / NaN for
+#: the others): steps, walking time (s), cadence (steps per walking second), walked length (m), heading
+#: source, removed gyro bias (deg/s), quality flag ("ok", "suspect", "poor") and warnings ("; "-joined)
+PDR_WALK_COLUMNS = ("pdr_steps", "pdr_walking_s", "pdr_cadence_hz", "pdr_length_m", "pdr_heading",
+                    "pdr_gyro_bias_dps", "pdr_quality", "pdr_warnings")
+#: time issues listed one by one in the ingest warnings per walk (the rest are counted)
+MAX_TIME_ISSUES_LISTED = 3
+#: Wi-Fi motion check (wifi_motion_check): s, the time between two scans compared; dBm, readings at least this
+#: strong count; the fewest BSSIDs two scans must share; m, PDR distance below which the walker stood / above
+#: which they walked between two scans; the fewest scan pairs for a verdict
+WIFI_PAIR_S = (10.0, 30.0)
+WIFI_MIN_DBM = -85.0
+WIFI_MIN_COMMON = 3
+WIFI_STILL_M, WIFI_MOVING_M = 0.5, 8.0
+#: a walk standing still by its PDR is suspect when its scans change by this fraction of the walking median
+#: or more: measured on the IPIN 2023 walks, standing 2-4 dB (at most 0.6 of the walking median, 6.4 dB)
+WIFI_WALKING_FRACTION = 0.75
+WIFI_MIN_PAIRS = 6
+#: bounds of the check's work per walk: BSSIDs compared (the most heard) and scan pairs (evenly thinned)
+WIFI_MAX_APS, WIFI_MAX_PAIRS = 300, 20000
 
 
 def _where(raw: RawInput, table: str) -> Callable[[int], str]:
@@ -154,11 +178,145 @@ def attach(poses: pd.DataFrame, wifi: pd.DataFrame, cfg: IngestConfig) -> np.nda
     return node
 
 
-def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[Dataset, Fingerprints, dict]:
-    """Validate, order, attach readings to nodes and average them into per-node fingerprints.
+def _pdr_one(wid: str, imu: RawImu, pdr_cfg: PdrConfig) -> tuple[pd.DataFrame, PdrReport, list[str]]:
+    """Poses, report and located warnings of one walk's raw IMU; problems -> InputError naming the file."""
+    try:
+        res = run_pdr(imu.signals, pdr_cfg)
+    except ImuTimeError as e:
+        raise InputError(f"walk {wid!r}: {e}", imu.where(e.stream, e.index)) from None
+    except ValueError as e:
+        raise InputError(f"walk {wid!r}: PDR failed: {e}", imu.source) from None
+    rep = res.report
+    issues = rep.time_issues
+    warn = [f"{imu.where(i.stream, i.index)}: {i.message}" for i in issues[:MAX_TIME_ISSUES_LISTED]]
+    if len(issues) > MAX_TIME_ISSUES_LISTED:
+        warn.append(f"{imu.source}: {len(issues) - MAX_TIME_ISSUES_LISTED} more timestamp problem(s)")
+    warn += [f"{imu.source}: walk {wid!r}: PDR {rep.quality}: {w}" for w in rep.warnings]
+    return res.poses.to_frame(wid), rep, warn
 
-    ``source`` (the reader's format name) fills the walks' ``source`` column where the reader left it empty.
+
+def derive_poses(raw: RawInput, pdr_cfg: PdrConfig) -> tuple[dict[str, PdrReport], list[str]]:
+    """Run the phone PDR on every walk of ``raw.imu`` and append the poses to ``raw.poses`` (with row names
+    "file (PDR step k)"). Returns the per-walk reports and the warnings (file:line where one applies)."""
+    if not raw.imu:
+        return {}, []
+    have = set(raw.poses["walk_id"].unique()) if len(raw.poses) else set()
+    both = [w for w in raw.imu if w in have]
+    if both:
+        raise InputError(f"walk {both[0]!r} has both poses and raw IMU; give one of them",
+                         raw.imu[both[0]].where("acc", 0))
+    frames, reports, warnings = [], {}, []
+    for wid, imu in raw.imu.items():
+        df, reports[wid], warn = _pdr_one(wid, imu, pdr_cfg)
+        frames.append(df)
+        warnings += warn
+    n0 = len(raw.poses)
+    new = pd.concat(frames, ignore_index=True)
+    raw.poses = pd.concat([raw.poses, new], ignore_index=True) if n0 else new
+    before = raw.where.get("poses")
+    src = {w: imu.source for w, imu in raw.imu.items()}
+    nw, ns = new["walk_id"].to_numpy(), new["step"].to_numpy()
+    raw.where["poses"] = lambda i: (before(i) if before is not None and i < n0 else
+                                    f"{src[nw[i - n0]]} (PDR step {int(ns[i - n0])})")
+    steps = sum(r.steps for r in reports.values())
+    srcs = sorted({r.heading_source for r in reports.values()})
+    raw.notes.append(f"phone PDR: {steps:,} steps in {len(reports)} walk(s) (heading: {', '.join(srcs)})")
+    return reports, warnings
+
+
+def _pdr_columns(walks: pd.DataFrame, reports: dict[str, PdrReport]) -> pd.DataFrame:
+    """The walks table with the PDR_WALK_COLUMNS filled from ``reports`` (missing walks: NaN / "")."""
+    out = walks.copy()
+    r = [reports.get(str(w)) for w in out["walk_id"]]
+    num = lambda f: [float(f(x)) if x is not None else np.nan for x in r]  # noqa: E731
+    txt = lambda f: [str(f(x)) if x is not None else "" for x in r]  # noqa: E731
+    out["pdr_steps"] = pd.array([x.steps if x is not None else None for x in r], dtype="Int64")
+    out["pdr_walking_s"] = num(lambda x: x.walking_s)
+    out["pdr_cadence_hz"] = num(lambda x: x.cadence_hz)
+    out["pdr_length_m"] = num(lambda x: x.walked_m)
+    out["pdr_heading"] = txt(lambda x: x.heading_source)
+    out["pdr_gyro_bias_dps"] = num(lambda x: x.gyro_bias_dps)
+    out["pdr_quality"] = txt(lambda x: x.quality)
+    out["pdr_warnings"] = txt(lambda x: "; ".join(x.warnings))
+    return out
+
+
+def _scan_pairs(poses: pd.DataFrame, wifi: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of one walk's scans WIFI_PAIR_S apart: the mean absolute RSSI difference over the BSSIDs both
+    hear above WIFI_MIN_DBM (at least WIFI_MIN_COMMON of them), and the PDR distance walked between them."""
+    w = wifi[wifi["rssi_dbm"] >= WIFI_MIN_DBM]
+    t, scan = np.unique(w["t_s"].to_numpy(float), return_inverse=True)
+    bssids, ap, n_ap = np.unique(w["bssid"].to_numpy(), return_inverse=True, return_counts=True)
+    if len(t) < 2:
+        return np.zeros(0), np.zeros(0)
+    # bounded work whatever the input: the most heard BSSIDs, and evenly thinned pairs
+    keep_ap = np.argsort(-n_ap, kind="stable")[:WIFI_MAX_APS]
+    col = np.full(len(bssids), -1)
+    col[keep_ap] = np.arange(len(keep_ap))
+    r = np.full((len(t), len(keep_ap)), np.nan)
+    sel = col[ap] >= 0
+    r[scan[sel], col[ap[sel]]] = w["rssi_dbm"].to_numpy(float)[sel]
+    lo = np.searchsorted(t, t + WIFI_PAIR_S[0], side="left")
+    hi = np.searchsorted(t, t + WIFI_PAIR_S[1], side="right")
+    n = hi - lo
+    i = np.repeat(np.arange(len(t)), n)
+    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
+    if len(i) > WIFI_MAX_PAIRS:
+        k = np.linspace(0, len(i) - 1, WIFI_MAX_PAIRS).astype(np.int64)
+        i, j = i[k], j[k]
+    diff = np.abs(r[i] - r[j])
+    common = np.isfinite(diff).sum(axis=1)
+    ok = common >= WIFI_MIN_COMMON
+    d_rssi = np.nansum(np.where(np.isfinite(diff), diff, 0.0), axis=1)[ok] / common[ok]
+    dist = np.r_[0.0, np.cumsum(np.hypot(np.diff(poses["x_m"].to_numpy(float)), np.diff(poses["y_m"].to_numpy(float))))]
+    at = dist[np.clip(np.searchsorted(poses["t_s"].to_numpy(float), t, side="right") - 1, 0, len(dist) - 1)]
+    return d_rssi, (at[j] - at[i])[ok]
+
+
+def wifi_motion_check(poses: pd.DataFrame, wifi: pd.DataFrame, reports: dict[str, PdrReport],
+                      source: dict[str, str]) -> list[str]:
+    """Warnings (and quality "suspect") for PDR walks that stand still while their Wi-Fi changes as if they
+    walked: over pairs of scans 10-30 s apart with no PDR step between them (< WIFI_STILL_M), the median RSSI
+    change reaches WIFI_WALKING_FRACTION of the median over all walks' pairs with more than WIFI_MOVING_M
+    walked between them. Missed steps, or a phone carried in a way the PDR does not follow."""
+    pw = poses.groupby("walk_id", sort=False)
+    ww = wifi.groupby("walk_id", sort=False)
+    pairs = {w: _scan_pairs(pw.get_group(w), ww.get_group(w)) for w in reports if w in ww.groups}
+    moving = np.concatenate([d[m > WIFI_MOVING_M] for d, m in pairs.values()]) if pairs else np.zeros(0)
+    if len(moving) < WIFI_MIN_PAIRS:
+        return []
+    ref = float(np.median(moving))
+    out = []
+    for w, (d, m) in pairs.items():
+        still = d[m < WIFI_STILL_M]
+        if len(still) >= WIFI_MIN_PAIRS and float(np.median(still)) >= WIFI_WALKING_FRACTION * ref:
+            msg = (f"no steps between {len(still)} pairs of scans 10-30 s apart whose RSSI changes nearly as much "
+                   f"as while walking (median {float(np.median(still)):.1f} dB, walking {ref:.1f} dB): steps missed?")
+            reports[w].warnings.append(msg)
+            reports[w].quality = "poor" if reports[w].quality == "poor" else "suspect"
+            out.append(f"{source.get(w, w)}: walk {w!r}: PDR suspect: {msg}")
+    return out
+
+
+def _pdr_summary(reports: dict[str, PdrReport]) -> dict:
+    """The per-walk PDR table of the ingest report."""
+    return {w: {"steps": r.steps, "walking_s": r.walking_s, "handling_s": r.handling_s, "duration_s": r.duration_s,
+                "cadence_hz": round(r.cadence_hz, 3) if np.isfinite(r.cadence_hz) else None,
+                "walked_m": round(r.walked_m, 2), "heading": r.heading_source,
+                "gyro_bias_dps": round(r.gyro_bias_dps, 3), "gyro_bias_from": r.bias_source,
+                "quality": r.quality, "warnings": r.warnings}
+            for w, r in reports.items()}
+
+
+def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: PdrConfig | None = None,
+                  ) -> tuple[Dataset, Fingerprints, dict]:
+    """Run the PDR on raw IMU, validate, order, attach readings to nodes and average them into per-node
+    fingerprints.
+
+    ``source`` (the reader's format name) fills the walks' ``source`` column where the reader left it empty;
+    ``pdr_cfg``: the phone PDR's settings (defaults when None).
     """
+    reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig())
     validate(raw, cfg)
     walks = raw.walks.copy()
     for c in WALK_COLUMNS:
@@ -191,6 +349,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     wifi["_w"] = walk_index.get_indexer(wifi["walk_id"])
     wifi = wifi.sort_values(["_w", "t_s"], kind="stable").drop(columns="_w").reset_index(drop=True)
     wifi["node"] = attach(poses, wifi, cfg)
+    all_readings = wifi   # for the PDR's Wi-Fi check: a walk without steps keeps no readings attached
     n_dropped = int((wifi["node"] < 0).sum())
     wifi = wifi[wifi["node"] >= 0].reset_index(drop=True)
     wifi = wifi[list(WIFI_COLUMNS)]
@@ -204,6 +363,9 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     truth = raw.truth_poses
     if truth is not None:
         truth = _match_truth(poses, truth, raw, cfg.max_attach_gap_s)
+    if reports:
+        pdr_warnings += wifi_motion_check(poses, all_readings, reports, {w: imu.source for w, imu in raw.imu.items()})
+        walks = _pdr_columns(walks, reports)
 
     ds = Dataset(
         walks=walks, poses=poses, wifi=wifi, fixes=fixes, truth_poses=truth, truth_aps=raw.truth_aps,
@@ -211,7 +373,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
     )
     fp = Fingerprints.from_readings(wifi)
     scans = wifi.groupby(["walk_id", "t_s"], sort=False).ngroups
-    summary = {
+    summary: dict[str, Any] = {
         "walks": len(walks),
         "poses": len(poses),
         "readings": len(wifi),
@@ -224,8 +386,10 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "") -> tuple[D
         "attach": cfg.attach,
         "skipped": dict(raw.skipped),
         "notes": list(raw.notes),
-        "warnings": [],
+        "warnings": list(pdr_warnings),
     }
+    if reports:
+        summary["pdr"] = _pdr_summary(reports)
     if dropped_walks:
         summary["warnings"].append(f"{len(dropped_walks)} walk(s) without poses dropped: {dropped_walks[:5]}")
     if len(one_step):

@@ -11,6 +11,7 @@ import pytest
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import IpinConfig, PdrConfig
 from rmbuild.errors import InputError
+from rmbuild.ingest_core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader, wgs84_to_enu
 from rmbuild.io.formats.msft_ilc import MsftIlcReader
 
@@ -20,7 +21,10 @@ FOOT = HERE / "tiny_logfile_imui.txt"
 
 
 def read(files, options: PdrConfig | None = None):
-    return IpinReader(options).read([Path(f) for f in files], IngestConfig())
+    """The reader's raw input, with the PDR run on its raw IMU as ingest does."""
+    raw = IpinReader(options).read([Path(f) for f in files], IngestConfig())
+    derive_poses(raw, options or PdrConfig())
+    return raw
 
 
 def write(tmp_path: Path, lines: list[str], name: str = "log.txt") -> Path:
@@ -31,6 +35,15 @@ def write(tmp_path: Path, lines: list[str], name: str = "log.txt") -> Path:
 
 def first(lines: list[str], tag: str, k: int = 0) -> int:
     return [i for i, ln in enumerate(lines) if ln.startswith(tag + ";")][k]
+
+
+def test_reader_only_reads():
+    raw = IpinReader().read([PHONE], IngestConfig())
+    assert len(raw.poses) == 0 and list(raw.imu) == ["tiny_logfile"]
+    imu = raw.imu["tiny_logfile"]
+    assert len(imu.signals.t_acc_s) == len(imu.lines["acc"]) > 100 and imu.signals.quat_xyzw.shape[1] == 4
+    lines = PHONE.read_text(encoding="utf-8").splitlines()
+    assert lines[int(imu.lines["acc"][0]) - 1].startswith("ACCE;") and imu.where("gyro", 0).startswith(f"{PHONE}:")
 
 
 def test_phone_logfile_reads():
@@ -118,8 +131,10 @@ def test_file_without_wifi_or_imu(tmp_path):
     with pytest.raises(InputError, match="no ACCE"):
         read([p])
     p = write(tmp_path, [ln for ln in lines if not ln.startswith("AHRS;")], "noahrs.txt")
-    with pytest.raises(InputError, match="no AHRS"):
+    with pytest.raises(InputError, match="no rotation-vector / AHRS samples") as e:
         read([p], PdrConfig(heading_source="rotation_vector"))
+    assert e.value.where == str(p)
+    assert read([p]).walks["walk_id"].tolist() == ["noahrs"]   # "auto": the gyroscope
     p = write(tmp_path, [ln for ln in lines if ln.startswith("%")], "header.txt")
     with pytest.raises(InputError, match="no data lines"):
         read([p])
@@ -161,3 +176,20 @@ def test_bssid_twice_in_one_scan_is_merged_through_ingest(tmp_path, capsys):
     r = run_cli(capsys, "ingest", tmp_path / "log.txt", "-w", tmp_path / "ws", "--format", "ipin")
     assert r.code == 0, r.err
     assert "merged 1 Wi-Fi readings repeating a BSSID" in r.err
+
+
+def test_stray_acce_time_is_dropped_naming_its_line(tmp_path):
+    from capped import run_capped
+
+    lines = PHONE.read_text(encoding="utf-8").splitlines()
+    i = first(lines, "ACCE", 11)
+    parts = lines[i].split(";")
+    lines[i] = ";".join(parts[:1] + ["1e9"] + parts[2:])   # 31 years after the others
+    p = write(tmp_path, lines)
+    r = run_capped("ingest", p, "-w", tmp_path / "ws")
+    assert r.code == 0, r.err
+    assert f"{p}:{i + 1}: acc: 1 sample(s) at t = 1e+09 s" in r.err and r.peak_rss_mb < 1000
+    lines.insert(i + 1, "WIFI;" + "x" * 10_000)
+    with pytest.raises(InputError, match="line of 10,005 characters") as e:
+        read([write(tmp_path, lines, "long.txt")])
+    assert e.value.where == f"{tmp_path / 'long.txt'}:{i + 2}"

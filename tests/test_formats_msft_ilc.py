@@ -12,6 +12,7 @@ import pytest
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import MsftIlcConfig, PdrConfig
 from rmbuild.errors import InputError
+from rmbuild.ingest_core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
 
@@ -21,7 +22,10 @@ ILC = DATASETS / "msft-ilc20" / "data"
 
 
 def read(files, options: PdrConfig | None = None):
-    return MsftIlcReader(options).read([Path(f) for f in files], IngestConfig())
+    """The reader's raw input, with the PDR run on its raw IMU as ingest does."""
+    raw = MsftIlcReader(options).read([Path(f) for f in files], IngestConfig())
+    derive_poses(raw, options or PdrConfig())
+    return raw
 
 
 def fixture_lines() -> list[str]:
@@ -37,6 +41,16 @@ def write(tmp_path: Path, lines: list[str], name: str = "trace.txt") -> Path:
 def line_of(lines: list[str], typ: str, k: int = 0) -> int:
     """0-based index of the k-th line of type ``typ``."""
     return [i for i, ln in enumerate(lines) if ln.split("\t")[1:2] == [typ]][k]
+
+
+def test_reader_only_reads():
+    raw = MsftIlcReader().read([FIXTURE], IngestConfig())
+    assert len(raw.poses) == 0 and list(raw.imu) == ["tiny_trace"]
+    imu = raw.imu["tiny_trace"]
+    lines = fixture_lines()
+    for stream, typ in (("acc", "TYPE_ACCELEROMETER"), ("gyro", "TYPE_GYROSCOPE"), ("yaw", "TYPE_ROTATION_VECTOR")):
+        assert lines[int(imu.lines[stream][0]) - 1].split("\t")[1] == typ
+    assert imu.where("acc", 2) == f"{FIXTURE}:{imu.lines['acc'][2]}"
 
 
 def test_fixture_reads():
@@ -147,7 +161,7 @@ def test_file_without_wifi_or_imu(tmp_path):
     with pytest.raises(InputError, match="no TYPE_ACCELEROMETER") as e:
         read([no_acc])
     no_rot = write(tmp_path, [ln for ln in lines if "\tTYPE_ROTATION_VECTOR\t" not in ln], "norot.txt")
-    with pytest.raises(InputError, match="no TYPE_ROTATION_VECTOR"):
+    with pytest.raises(InputError, match="no rotation-vector / AHRS samples"):
         read([no_rot], PdrConfig(heading_source="rotation_vector"))
     header_only = write(tmp_path, [ln for ln in lines if ln.startswith("#")], "header.txt")
     with pytest.raises(InputError, match="no data lines"):
@@ -229,3 +243,56 @@ def test_real_site2_f4_pdr_against_waypoints():
     # stale rows: the filter drops roughly half
     tr = parse_trace(files[0], PdrConfig())
     assert tr.n_wifi_stale > 0
+
+
+# --- hostile timestamps and lines: bounded memory, the line named (run capped in a child process) ---
+
+def _set_time(line: str, t_ms: int | str) -> str:
+    return f"{t_ms}{line[line.index(chr(9)):]}"
+
+
+def test_stray_imu_timestamp_is_dropped_naming_its_line(tmp_path):
+    from capped import run_capped
+
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_ACCELEROMETER", 7)
+    lines[i] = _set_time(lines[i], 1)   # 1 ms after 1970: a 50-year gap before the rest
+    p = write(tmp_path, lines)
+    r = run_capped("ingest", p, "-w", tmp_path / "ws")
+    assert r.code == 0, r.err
+    assert f"{p}:{i + 1}: acc: 1 sample(s) at t = 0.001 s" in r.err and "dropped (bad timestamp)" in r.err
+    assert r.peak_rss_mb < 1000
+
+
+def test_clock_jump_is_an_error_naming_the_line(tmp_path):
+    from capped import run_capped
+
+    lines = fixture_lines()
+    acc = [k for k, ln in enumerate(lines) if "\tTYPE_ACCELEROMETER\t" in ln]
+    day30 = 30 * 86400 * 1000
+    for k in acc[len(acc) // 2:]:   # the second half of the accelerometer jumps 30 days ahead
+        lines[k] = _set_time(lines[k], int(lines[k].split("\t")[0]) + day30)
+    p = write(tmp_path, lines)
+    r = run_capped("ingest", p, "-w", tmp_path / "ws")
+    assert r.code == 2, r.err
+    assert r.err.startswith(f"error: {p}:{acc[len(acc) // 2] + 1}: walk 'trace': acc time jumps by 2.592e+06 s")
+    assert r.err.count("\n") == 0 and r.peak_rss_mb < 1000
+
+
+def test_overlong_line_and_huge_time_are_errors_naming_the_line(tmp_path):
+    from capped import run_capped
+
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_WIFI", 2)
+    parts = lines[i].split("\t")
+    lines[i] = "\t".join(parts[:2] + ["x" * 2_000_000] + parts[3:])   # a 2 MB SSID
+    p = write(tmp_path, lines)
+    r = run_capped("ingest", p, "-w", tmp_path / "ws", timeout_s=60)
+    assert r.code == 2 and r.err.startswith(f"error: {p}:{i + 1}: line of 2,000,"), r.err
+    assert r.peak_rss_mb < 1000
+    lines = fixture_lines()
+    i = line_of(lines, "TYPE_GYROSCOPE", 3)
+    lines[i] = _set_time(lines[i], "9" * 20)
+    with pytest.raises(InputError, match="has 20 digits") as e:
+        read([write(tmp_path, lines, "t20.txt")])
+    assert e.value.where == f"{tmp_path / 't20.txt'}:{i + 1}"

@@ -18,7 +18,7 @@ from rmbuild.cli.options import common_options, start
 @click.option("--test-device", default=None, metavar="K,B",
               help="Put the test walks on a device with RSS model k*phi + b (e.g. 1.25,-6).")
 @click.option("--raw-imu", is_flag=True,
-              help="Write raw phone-IMU signals (imu table, 50 Hz) instead of per-step poses: ingest runs the PDR.")
+              help="Write raw phone-IMU signals (imu table, [phone] settings) instead of poses: ingest runs the PDR.")
 @common_options
 def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, config_path, force, quiet, verbose):
     """Write a seeded synthetic venue to OUT_DIR: the files `rmbuild ingest OUT_DIR` reads, plus truth/.

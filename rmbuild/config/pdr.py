@@ -2,8 +2,8 @@
 
 The readers for Microsoft ILC 2.0 traces (``[pdr.msft_ilc]``) and IPIN / GetSensorData logfiles
 (``[pdr.ipin]``) turn raw phone IMU signals into per-step poses with the settings at the top level.
-Numbers credited to a paper (author and year; docs/references.md) are that paper's defaults; the rest were
-measured on the ``msft-ilc20`` traces (docs/formats-real.md).
+The defaults were measured on the Microsoft ILC 2.0 and IPIN 2023 walks and on synthetic carrying modes
+(docs/formats-real.md).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Literal
 @dataclass(frozen=True)
 class MsftIlcConfig:
     # s; a TYPE_WIFI row whose last-seen time is older than its scan time by more than this is a stale
-    # cache entry and is dropped (on MS ILC 2.0 traces 3 s drops 55-60 % of the rows).
+    # cache entry and is dropped (on the MS ILC floors 3 s drops 55-60 % of the rows).
     max_wifi_age_s: float = 3.0
     # a trace without any (fresh) Wi-Fi row is an input error (false: keep the walk, Wi-Fi-less).
     require_wifi: bool = True
@@ -56,51 +56,28 @@ class IpinConfig:
 
 @dataclass(frozen=True)
 class PdrConfig:
-    # --- step detection on the acceleration magnitude ---
-    # "peak_valley": subway-station paper, a peak followed by a valley, deeper than pv_min_swing_mps2, >= 250 ms apart;
-    # "pan_tompkins": Becker et al. 2015, derivative (eq. 6) + squaring (eq. 7), peaks above pt_threshold with a
-    # 300 ms pause. The default was chosen by step-count accuracy (docs/formats-real.md).
-    step_detector: Literal["peak_valley", "pan_tompkins"] = "peak_valley"
-    # Hz; the magnitude is resampled to this uniform rate before detection (phone timestamps jitter).
-    sample_hz: float = 50.0
-    # Hz; low-pass (2nd-order Butterworth, zero phase) cut-off applied to the magnitude. 0 = none.
-    lowpass_hz: float = 2.5
-    # s; subway-station paper: minimum time between a peak and its valley (and between two steps).
-    pv_min_interval_s: float = 0.25
-    # m/s²; subway-station paper: minimum peak-to-valley swing of one step ("threshold from offline training").
-    pv_min_swing_mps2: float = 2.5
-    # (m/s²)²-ish; Becker et al. 2015: threshold on the squared derivative signal (1 + y)² - 1 for a peak.
-    pt_threshold: float = 2.0
-    # s; Becker et al. 2015: detection pause after a step.
-    pt_refractory_s: float = 0.3
-    # s; a gap between steps longer than this counts as standing: the step frequency after it is
-    # unknown (the walk's median is used for the step length model).
-    max_step_interval_s: float = 1.5
+    # --- sensor clock ---
+    # s; a gap in the accelerometer's timestamps longer than this cuts a walk's IMU into blocks: a block of
+    # a few samples is a bad timestamp and is dropped with a warning; two long blocks are an error (a clock
+    # jump, or two recordings in one walk). Shorter gaps over 0.5 s are dropouts (no steps, heading held).
+    max_gap_s: float = 30.0
 
     # --- heading ---
-    # "rotation_vector": yaw of the (magnetometer-referenced) rotation vector / AHRS, made relative to the
-    # start; "gyro": integrated gyroscope projected on the vertical (needs GYRO/TYPE_GYROSCOPE and
-    # gravity from the accelerometer); the absolute yaw is always taken from the rotation vector.
-    heading_source: Literal["gyro", "rotation_vector"] = "gyro"
+    # "auto": the gyroscope about gravity (bias from the rotation vector or still periods) when the walk
+    # has one, else the rotation vector; "gyro" / "rotation_vector" force one (an error when it is missing).
+    # The rotation vector's yaw bends near steel indoors (docs/formats-real.md); the absolute yaw
+    # (yaw_abs_rad) is always the rotation vector's.
+    heading_source: Literal["auto", "gyro", "rotation_vector"] = "auto"
     # rad; 1-sigma of the absolute yaw observation per Android accuracy flag 0 (unreliable), 1 (low),
     # 2 (medium), 3 (high). Measured on ILC F1: walks agree to a median 6°, P90 17° (flag 3).
     yaw_sigma_by_accuracy_rad: tuple[float, float, float, float] = (0.6, 0.45, 0.3, 0.15)
 
     # --- step length ---
-    # "fixed": step_length_m; "frequency": S = freq_alpha * f + freq_beta (He et al. 2015);
-    # "weinberg": S = weinberg_k * (a_max - a_min)^(1/4) over the step's magnitude samples.
-    # Default chosen by waypoint error on ILC F1 and F4 (docs/formats-real.md).
-    step_length_model: Literal["weinberg", "fixed", "frequency"] = "weinberg"
-    # m; fixed step length (also the fallback of "weinberg"). Calibrated on ILC site1/F1 with the default
-    # detector: 0.72 m (site2/F4: 0.73 m).
-    step_length_m: float = 0.72
-    # m·s; m; He et al. 2015's linear model (SLAC searches alpha in [0.1, 1], beta in [-0.5, 0]).
-    freq_alpha: float = 0.3
-    freq_beta: float = 0.1
-    # m/(m/s²)^(1/4); Weinberg's constant for a handheld phone, on the low-passed magnitude (calibrated on
-    # ILC site1/F1 with the default detector; site2/F4 gives 0.45).
-    weinberg_k: float = 0.44
-    # m; step lengths are clipped to this range whatever the model.
+    # m; step length of a walker whose steps swing the acceleration magnitude by 4 m/s² peak to valley
+    # (rmbuild/pdr/length.py scales it by the gait signal; the optimizer refines one scale per walk).
+    # Chosen leave-one-out over the five ILC 2.0 floors and the two IPIN 2023 phones (docs/formats-real.md).
+    step_length_m: float = 0.645
+    # m; step lengths are clipped to this range (before the shortening of turning steps).
     min_step_m: float = 0.3
     max_step_m: float = 1.2
 
@@ -109,21 +86,13 @@ class PdrConfig:
     ipin: IpinConfig = field(default_factory=IpinConfig)
 
     def validate(self) -> None:
-        if self.sample_hz <= 0:
-            raise ValueError("sample_hz must be > 0")
-        if self.lowpass_hz < 0 or self.lowpass_hz >= self.sample_hz / 2:
-            raise ValueError("lowpass_hz must be >= 0 and below sample_hz / 2")
-        if self.pv_min_interval_s <= 0 or self.pt_refractory_s <= 0:
-            raise ValueError("pv_min_interval_s and pt_refractory_s must be > 0")
-        if self.pv_min_swing_mps2 < 0 or self.pt_threshold < 0:
-            raise ValueError("pv_min_swing_mps2 and pt_threshold must be >= 0")
-        if self.max_step_interval_s <= 0:
-            raise ValueError("max_step_interval_s must be > 0")
-        if any(not (s > 0 and math.isfinite(s)) for s in self.yaw_sigma_by_accuracy_rad):
-            raise ValueError("yaw_sigma_by_accuracy_rad must be > 0")
-        if not 0 < self.min_step_m <= self.max_step_m:
-            raise ValueError("need 0 < min_step_m <= max_step_m")
-        if self.step_length_m <= 0 or self.weinberg_k <= 0:
-            raise ValueError("step_length_m and weinberg_k must be > 0")
+        if not 1.0 <= self.max_gap_s <= 86400.0:
+            raise ValueError("max_gap_s must be in [1, 86400] s")
+        if any(not (0 < s <= math.pi and math.isfinite(s)) for s in self.yaw_sigma_by_accuracy_rad):
+            raise ValueError("yaw_sigma_by_accuracy_rad must be in (0, pi]")
+        if not 0.05 <= self.min_step_m <= self.max_step_m <= 3.0:
+            raise ValueError("need 0.05 <= min_step_m <= max_step_m <= 3 m")
+        if not 0.05 <= self.step_length_m <= 3.0:
+            raise ValueError("step_length_m must be in [0.05, 3] m")
         self.msft_ilc.validate()
         self.ipin.validate()

@@ -364,6 +364,44 @@ class DevicesConfig:
                 raise ValueError("devices.test_device b must be in [-30, 30] dB")
 
 
+CARRY_MODES = ("texting", "calling", "swinging", "pocket")
+
+
+@dataclass(frozen=True)
+class PhoneImuConfig:
+    """Raw phone IMU of ``simulate --raw-imu`` (rmbuild.pdr.synth): how each walk's phone is carried and
+    sampled. The rotation vector's yaw error is the magnetometer's (``[magnetometer]``)."""
+
+    # ways of carrying the phone a walk draws from (uniformly): "texting" (in front, read, pitched up),
+    # "calling" (at the ear), "swinging" (in the hand, arm swinging), "pocket" (front trouser pocket).
+    carry_modes: tuple[str, ...] = CARRY_MODES
+    # Hz; range of a walk's IMU sampling rate (phones: 50-200 Hz).
+    sample_hz: tuple[float, float] = (50.0, 200.0)
+    # ms; 1-sigma jitter of the reported sample timestamps.
+    jitter_ms: float = 2.0
+    # 1; range of a walk's gait intensity: the vertical bounce relative to an inverted pendulum with the
+    # walk's step lengths (below 1 gentle, above 1 brisk).
+    bounce_scale: tuple[float, float] = (0.6, 1.4)
+    # deg/s; 1-sigma of a walk's constant gyroscope bias on each axis.
+    gyro_bias_sd_dps: float = 0.3
+    # m/s²; 1-sigma of the accelerometer's white noise.
+    acc_noise_mps2: float = 0.05
+    # rad/s; 1-sigma of the gyroscope's white noise.
+    gyro_noise_radps: float = 0.01
+
+    def validate(self) -> None:
+        if not self.carry_modes or any(m not in CARRY_MODES for m in self.carry_modes):
+            raise ValueError(f"phone.carry_modes must be a non-empty list of {list(CARRY_MODES)}")
+        _range("phone.sample_hz", self.sample_hz, 20.0, 500.0)
+        if not 0.0 <= self.jitter_ms <= 20.0:
+            raise ValueError("phone.jitter_ms must be in [0, 20]")
+        _range("phone.bounce_scale", self.bounce_scale, 0.2, 3.0)
+        if not 0.0 <= self.gyro_bias_sd_dps <= 10.0:
+            raise ValueError("phone.gyro_bias_sd_dps must be in [0, 10]")
+        if not 0.0 <= self.acc_noise_mps2 <= 2.0 or not 0.0 <= self.gyro_noise_radps <= 0.5:
+            raise ValueError("phone.acc_noise_mps2 must be in [0, 2] and phone.gyro_noise_radps in [0, 0.5]")
+
+
 @dataclass(frozen=True)
 class SimulateConfig:
     # seed of the numpy Generator behind every random draw (same config + seed -> identical tables).
@@ -380,11 +418,13 @@ class SimulateConfig:
     magnetometer: MagnetometerConfig = field(default_factory=MagnetometerConfig)
     # phones and their RSS models
     devices: DevicesConfig = field(default_factory=DevicesConfig)
+    # raw phone IMU (only with `simulate --raw-imu`)
+    phone: PhoneImuConfig = field(default_factory=PhoneImuConfig)
 
     def validate(self) -> None:
         if not 0 <= self.seed < 2**63:
             raise ValueError("seed must be in [0, 2**63)")
-        for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices):
+        for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices, self.phone):
             sub.validate()
 
 

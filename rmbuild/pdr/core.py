@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
 from rmbuild.config.pdr import PdrConfig
-from rmbuild.pdr.heading import gyro_yaw, interval_mean, wrap_angle
-from rmbuild.pdr.length import step_frequency, step_lengths
-from rmbuild.pdr.steps import detect_steps
+from rmbuild.pdr.heading import interval_mean, wrap_angle
+from rmbuild.pdr.length import step_lengths, step_swings
+from rmbuild.pdr.quality import PdrReport, assess
+from rmbuild.pdr.steps import GaitWindows, bandpassed_magnitude, gait_windows, pick_steps
+from rmbuild.pdr.timebase import TimeIssue, dropouts, main_block, resample, uniform_grid, within
+from rmbuild.pdr.yaw import relative_yaw
+
+#: m/s²; RMS of the band-passed acceleration magnitude below which a gait window is standing. Measured on
+#: the IPIN 2023 and ILC 2.0 phones: standing 0.02-0.1, the gentlest walking 0.5-1 (docs/formats-real.md)
+MIN_WALK_RMS_MPS2 = 0.25
 
 
 @dataclass
@@ -19,7 +26,8 @@ class ImuSignals:
 
     ``acc_mps2``: (n, 3) accelerometer (specific force, device frame). ``yaw_abs_rad``: (m,) absolute yaw
     (ENU, CCW from east) at ``t_yaw_s`` from the rotation vector / AHRS, with Android accuracy flags
-    ``yaw_accuracy`` (m,) int (0..3; -1 = unknown). ``gyro_radps``: (k, 3) body rates (device frame).
+    ``yaw_accuracy`` (m,) int (0..3; -1 = unknown) and, when recorded, the orientation itself ``quat_xyzw``
+    (m, 4) (device -> ENU; else shape (0, 4)). ``gyro_radps``: (k, 3) body rates (device frame).
     Missing series are empty arrays.
     """
 
@@ -30,6 +38,7 @@ class ImuSignals:
     yaw_accuracy: np.ndarray
     t_gyro_s: np.ndarray
     gyro_radps: np.ndarray
+    quat_xyzw: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
 
 @dataclass
@@ -38,7 +47,7 @@ class StepPoses:
 
     All arrays (k + 1,): ``t_s`` s; ``x_m``, ``y_m`` m and ``heading_rad`` (CCW, relative to the start) in the
     walk's own frame; ``yaw_abs_rad`` absolute yaw of that step (NaN when unknown) with 1-sigma
-    ``yaw_abs_sigma_rad``; ``step_freq_hz`` (NaN for row 0 and after a stop); ``step_length_m`` (0 for row 0).
+    ``yaw_abs_sigma_rad``; ``step_freq_hz`` (NaN for row 0); ``step_length_m`` (0 for row 0).
     """
 
     t_s: np.ndarray
@@ -69,6 +78,14 @@ class StepPoses:
         })
 
 
+@dataclass
+class PdrResult:
+    """The poses of one walk and what the PDR found on the way (:class:`rmbuild.pdr.quality.PdrReport`)."""
+
+    poses: StepPoses
+    report: PdrReport
+
+
 def integrate_steps(t0_s: float, step_t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Dead-reckon steps: pose k = pose k-1 + length_k * (cos h_k, sin h_k), heading h_k.
@@ -91,6 +108,12 @@ def integrate_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: n
     return np.r_[t0_s, t_s], x, y, th
 
 
+#: step periods; each step's heading is the mean over [t - 1, t + 1] periods: one stride centred on the step
+#: (a swinging phone's yaw oscillates once per stride; a window of the step's own interval, or one stride
+#: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/formats-real.md)
+HEADING_WINDOW_PERIODS = (-1.0, 1.0)
+
+
 def yaw_sigma(accuracy: np.ndarray, cfg: PdrConfig) -> np.ndarray:
     """1-sigma in rad of an absolute yaw reading per Android accuracy flag (unknown flags -> flag 0's)."""
     table = np.asarray(cfg.yaw_sigma_by_accuracy_rad, dtype=np.float64)
@@ -98,54 +121,109 @@ def yaw_sigma(accuracy: np.ndarray, cfg: PdrConfig) -> np.ndarray:
     return np.where((a >= 0) & (a <= 3), table[np.clip(a, 0, 3).astype(np.int64)], table[0])
 
 
-def run_pdr(imu: ImuSignals, cfg: PdrConfig) -> StepPoses:
+def clean_clock(imu: ImuSignals, cfg: PdrConfig) -> tuple[ImuSignals, list[TimeIssue]]:
+    """The signals without stray timestamps (accelerometer blocks cut off by a gap > ``cfg.max_gap_s``,
+    gyro / yaw samples outside the accelerometer's span) and without repeated times; the issues found.
+    Raises :class:`rmbuild.pdr.timebase.ImuTimeError` on a clock jump between two long blocks."""
+    keep, issues = main_block(imu.t_acc_s, cfg.max_gap_s, "acc")
+    keep &= np.r_[True, np.diff(imu.t_acc_s) > 0]
+    ta = imu.t_acc_s[keep]
+    lo, hi = float(ta[0]), float(ta[-1])
+    kg, ig = within(imu.t_gyro_s, lo, hi, "gyro", 1.0)
+    kg &= np.r_[True, np.diff(imu.t_gyro_s) > 0]
+    ky, iy = within(imu.t_yaw_s, lo, hi, "yaw", 1.0)
+    ky &= np.r_[True, np.diff(imu.t_yaw_s) > 0]
+    quat = imu.quat_xyzw[ky] if len(imu.quat_xyzw) == len(imu.t_yaw_s) else np.zeros((0, 4))
+    out = replace(imu, t_acc_s=ta, acc_mps2=imu.acc_mps2[keep], t_gyro_s=imu.t_gyro_s[kg],
+                  gyro_radps=imu.gyro_radps[kg], t_yaw_s=imu.t_yaw_s[ky], yaw_abs_rad=imu.yaw_abs_rad[ky],
+                  yaw_accuracy=imu.yaw_accuracy[ky], quat_xyzw=quat)
+    return out, issues + ig + iy + dropouts(ta, "acc")
+
+
+def _absolute_yaw(imu: ImuSignals, t0: float, step_t: np.ndarray, w0: np.ndarray, w1: np.ndarray,
+                  cfg: PdrConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(k + 1,) absolute yaw at the start and per step (mean over [w0, w1]) and its 1-sigma from the accuracy
+    flags; NaN without a rotation vector."""
+    k = len(step_t)
+    if len(imu.t_yaw_s) == 0:
+        return np.full(k + 1, np.nan), np.full(k + 1, np.nan)
+    yaw_u = np.unwrap(np.asarray(imu.yaw_abs_rad, dtype=np.float64))
+    yaw0 = float(np.interp(t0, imu.t_yaw_s, yaw_u))
+    yaw_abs = wrap_angle(np.r_[yaw0, interval_mean(imu.t_yaw_s, yaw_u, w0, w1) if k else np.zeros(0)])
+    at = np.interp(np.r_[t0, step_t], imu.t_yaw_s, np.arange(len(imu.t_yaw_s)))
+    return yaw_abs, yaw_sigma(np.asarray(imu.yaw_accuracy)[np.rint(at).astype(np.int64)], cfg)
+
+
+def _handled_at(win: GaitWindows, t_s: np.ndarray) -> np.ndarray:
+    """(k,) true where the gait window nearest to each time is one of the phone being handled."""
+    if len(win.t_s) == 0:
+        return np.zeros(len(t_s), dtype=bool)
+    j = np.clip(np.searchsorted(win.t_s, t_s), 1, max(len(win.t_s) - 1, 1))
+    if len(win.t_s) > 1:
+        j = np.where(np.abs(t_s - win.t_s[j - 1]) <= np.abs(win.t_s[j] - t_s), j - 1, j)
+    else:
+        j = np.zeros(len(t_s), dtype=np.int64)
+    return win.handling[j]
+
+
+def _heading_source(imu: ImuSignals, cfg: PdrConfig) -> str:
+    has_gyro, has_yaw = len(imu.t_gyro_s) >= 2, len(imu.t_yaw_s) >= 2
+    if cfg.heading_source == "rotation_vector" or (cfg.heading_source == "auto" and not has_gyro):
+        if not has_yaw:
+            raise ValueError("no gyroscope and no rotation-vector / AHRS samples: no heading"
+                             if cfg.heading_source == "auto" else
+                             "no rotation-vector / AHRS samples for heading_source = 'rotation_vector'")
+        return "rotation_vector"
+    if not has_gyro:
+        raise ValueError("no gyroscope samples for heading_source = 'gyro'")
+    return "gyro"
+
+
+def run_pdr(imu: ImuSignals, cfg: PdrConfig) -> PdrResult:
     """Steps, heading, step length and integration for one walk of phone IMU data.
 
-    Raises ValueError when a signal the configuration needs is missing (no accelerometer; no rotation
-    vector for ``heading_source="rotation_vector"``; no gyroscope for ``"gyro"``).
+    Raises ValueError when a signal the configuration needs is missing (no accelerometer; no heading
+    source), :class:`rmbuild.pdr.timebase.ImuTimeError` (a ValueError) on a clock jump.
     """
     if len(imu.t_acc_s) < 2:
         raise ValueError("no accelerometer samples")
+    imu, issues = clean_clock(imu, cfg)
+    if len(imu.t_acc_s) < 2:
+        raise ValueError("fewer than 2 accelerometer samples with distinct times")
+    source = _heading_source(imu, cfg)
     t0 = float(imu.t_acc_s[0])
-    step_t, tu, mag = detect_steps(imu.t_acc_s, imu.acc_mps2, cfg)
+    grid = uniform_grid(imu.t_acc_s, "acc")
+    s = bandpassed_magnitude(grid, imu.t_acc_s, imu.acc_mps2)
+    rate = (resample(grid, imu.t_gyro_s, np.linalg.norm(imu.gyro_radps, axis=1)) if len(imu.t_gyro_s) >= 2
+            else None)
+    det = pick_steps(grid, s, gait_windows(grid, s, MIN_WALK_RMS_MPS2, rate), MIN_WALK_RMS_MPS2)
+    step_t, period = det.t_s, det.period_s
     k = len(step_t)
-    # the interval each step's heading is averaged over
-    prev = np.maximum(np.r_[t0, step_t[:-1]], step_t - cfg.max_step_interval_s) if k else step_t
-    has_yaw = len(imu.t_yaw_s) > 0
-    if has_yaw:
-        yaw_u = np.unwrap(np.asarray(imu.yaw_abs_rad, dtype=np.float64))
-        yaw0 = float(np.interp(t0, imu.t_yaw_s, yaw_u))
-        yaw_steps_u = interval_mean(imu.t_yaw_s, yaw_u, prev, step_t)
-        yaw_abs = wrap_angle(np.r_[yaw0, yaw_steps_u])
-        acc_at = np.interp(np.r_[t0, step_t], imu.t_yaw_s, np.arange(len(imu.t_yaw_s)))
-        sig = yaw_sigma(np.asarray(imu.yaw_accuracy)[np.rint(acc_at).astype(np.int64)], cfg)
-    else:
-        yaw_abs = np.full(k + 1, np.nan)
-        sig = np.full(k + 1, np.nan)
-    if cfg.heading_source == "rotation_vector":
-        if not has_yaw:
-            raise ValueError("no rotation-vector / AHRS samples for heading_source = 'rotation_vector'")
-        rel = yaw_steps_u - yaw0
-    else:
-        if len(imu.t_gyro_s) < 2:
-            raise ValueError("no gyroscope samples for heading_source = 'gyro'")
-        g = gyro_yaw(imu.t_gyro_s, imu.gyro_radps, imu.t_acc_s, imu.acc_mps2)
-        g0 = float(np.interp(t0, imu.t_gyro_s, g))
-        rel = interval_mean(imu.t_gyro_s, g, prev, step_t) - g0
-    freq = step_frequency(step_t, t0, cfg.max_step_interval_s)
-    length = step_lengths(step_t, freq, tu, mag, cfg)
+    w0, w1 = step_t + HEADING_WINDOW_PERIODS[0] * period, step_t + HEADING_WINDOW_PERIODS[1] * period
+    yaw = relative_yaw(imu, source, t0)
+    rel = interval_mean(yaw.t_s, yaw.yaw_rad, w0, w1) if k else np.zeros(0)
+    # the absolute yaw over the step's own interval: the optimizer links more ILC F1 walks with it (78 of 106)
+    # than with the stride window (68), docs/formats-real.md
+    yaw_abs, sig = _absolute_yaw(imu, t0, step_t, step_t - period, step_t, cfg)
+    # while the phone is handled (waved, shaken) its yaw says nothing about a walking direction
+    handled = _handled_at(det.windows, np.r_[t0, step_t])
+    yaw_abs[handled], sig[handled] = np.nan, np.nan
+    turn = np.interp(step_t + period / 2, yaw.t_s, yaw.yaw_rad) - np.interp(step_t - period / 2, yaw.t_s, yaw.yaw_rad)
+    length = step_lengths(step_swings(step_t, period, grid.t_s, s), turn, cfg)
     t, x, y, h = integrate_steps(t0, step_t, length, rel)
-    return StepPoses(
-        t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=yaw_abs, yaw_abs_sigma_rad=sig,
-        step_freq_hz=np.r_[np.nan, freq], step_length_m=np.r_[0.0, length],
-    )
+    poses = StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=yaw_abs,
+                      yaw_abs_sigma_rad=sig, step_freq_hz=np.r_[np.nan, 1.0 / period],
+                      step_length_m=np.r_[0.0, length])
+    return PdrResult(poses, assess(poses, det, yaw, issues, float(imu.t_acc_s[-1]) - t0))
 
 
 def poses_from_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: np.ndarray,
                           dtheta_rad: np.ndarray) -> StepPoses:
     """Per-step poses from foot-IMU step increments (no absolute yaw: NaN)."""
     t, x, y, h = integrate_increments(t0_s, t_s, dx_m, dy_m, dtheta_rad)
-    freq = np.r_[np.nan, step_frequency(np.asarray(t_s, dtype=np.float64), t0_s, 1.5)]
+    dt = np.diff(np.asarray(t_s, dtype=np.float64))
+    f = np.where((dt > 0) & (dt <= 1.5), 1.0 / np.where(dt > 0, dt, 1.0), np.nan)
+    freq = np.r_[np.nan, np.nan, f] if len(t_s) else np.full(1, np.nan)
     n = len(t)
     return StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=np.full(n, np.nan),
                      yaw_abs_sigma_rad=np.full(n, np.nan), step_freq_hz=freq,

@@ -1,4 +1,4 @@
-"""Heading of a handheld phone: absolute yaw from the rotation vector, relative yaw from it or the gyro.
+"""Angles and the rotation vector: wrap, Android rotation vector -> quaternion -> yaw, interval means.
 
 Convention (used for every ``*_rad`` heading in rmbuild): counter-clockwise from the x axis. For the
 absolute yaw the world frame is Android's ENU (x east, y north), so ``yaw_abs_rad = pi/2 - azimuth``.
@@ -46,37 +46,6 @@ def yaw_from_quat(q: np.ndarray) -> np.ndarray:
 def yaw_from_azimuth_deg(azimuth_deg: np.ndarray) -> np.ndarray:
     """ENU yaw in rad from a compass azimuth in degrees (clockwise from north)."""
     return wrap_angle(np.pi / 2 - np.deg2rad(np.asarray(azimuth_deg, dtype=np.float64)))
-
-
-def gyro_yaw(t_s: np.ndarray, gyro_radps: np.ndarray, t_acc_s: np.ndarray, acc_mps2: np.ndarray,
-             gravity_tau_s: float = 1.0) -> np.ndarray:
-    """(n,) integrated yaw in rad (CCW seen from above, 0 at the first sample) from a phone gyroscope.
-
-    The body rate (n, 3) in rad/s is projected on the unit "up" vector, estimated in the device frame as
-    the accelerometer (m, 3) low-passed with time constant ``gravity_tau_s`` and interpolated to ``t_s``.
-    Trapezoidal integration.
-    """
-    from scipy import signal  # imported here: scipy.signal costs ~1 s at import
-
-    t_s = np.asarray(t_s, dtype=np.float64)
-    if len(t_s) == 0:
-        return np.zeros(0)
-    acc = np.asarray(acc_mps2, dtype=np.float64)
-    ta = np.asarray(t_acc_s, dtype=np.float64)
-    # gravity direction: the accelerometer low-passed (first-order Butterworth, zero phase)
-    if len(ta) > 12:
-        fs = (len(ta) - 1) / max(ta[-1] - ta[0], 1e-9)
-        fc = min(1.0 / (2 * np.pi * gravity_tau_s), 0.45 * fs)
-        sos = signal.butter(1, fc, btype="low", fs=fs, output="sos")
-        g = signal.sosfiltfilt(sos, acc, axis=0, padlen=min(len(ta) - 1, int(3 * fs)))
-    else:
-        g = acc
-    up = np.column_stack([np.interp(t_s, ta, g[:, i]) for i in range(3)])
-    up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
-    rate = np.sum(np.asarray(gyro_radps, dtype=np.float64) * up, axis=1)
-    out = np.zeros(len(t_s))
-    out[1:] = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t_s))
-    return out
 
 
 def interval_mean(t_s: np.ndarray, values: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:

@@ -41,13 +41,14 @@ def run(
     t_read = time.perf_counter() - t0
     progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
-    ds, fp, summary = build_dataset(raw, cfg, source=reader.name)
+    ds, fp, summary = build_dataset(raw, cfg, source=reader.name, pdr_cfg=pdr_cfg)
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
     progress.phase("writing workspace")
     with Workspace.create(workspace, force=force) as w:
         write_dataset(w, ds, fp)
-        w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if reader.name != "rmbuild" else ""))
+        uses_pdr = reader.name != "rmbuild" or bool(raw.imu)
+        w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if uses_pdr else ""))
         summary["time_s"] = {"read": round(t_read, 3), "validate_attach": round(t_build, 3),
                              "total": round(time.perf_counter() - t0, 3)}
         w.report = summary

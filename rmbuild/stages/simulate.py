@@ -74,7 +74,8 @@ def run(
         from rmbuild.synthetic.imu import phone_imu_table
 
         progress.phase("synthesising phone IMU")
-        imu = phone_imu_table(data.truth_poses, cfg.seed)
+        imu, phones = phone_imu_table(data.truth_poses, data.poses, cfg.seed, cfg.phone)
+        data.truth_walks = data.truth_walks.merge(phones, on="walk_id", how="left")
     with replacing_dir(out) as tmp:
         for attr, stem in TABLE_FILES.items():
             df = getattr(data, attr, None)

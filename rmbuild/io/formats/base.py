@@ -7,8 +7,11 @@ step increments and attachment of Wi-Fi readings to pose nodes happen afterwards
 
 Contract for ``Reader.read``:
 - ``poses``: walk_id (str), t_s (float s), x_m, y_m, heading_rad — per-step poses in the walk's own frame;
-  optional yaw_abs_rad, yaw_abs_sigma_rad, step_freq_hz. (Our own schema may instead carry step
-  increments; its reader integrates them.)
+  optional yaw_abs_rad, yaw_abs_sigma_rad, step_freq_hz. (Step increments, e.g. a foot IMU's, are
+  integrated by the reader.)
+- ``imu``: walk_id -> :class:`RawImu`, the raw phone IMU of the walks that come without poses (a walk has
+  poses or IMU, never both). Readers only read: :mod:`rmbuild.ingest_core` runs the PDR on them, once, for
+  every format.
 - ``wifi``: walk_id, t_s, bssid (str), rssi_dbm (float); optional freq_mhz, ssid.
 - ``fixes``: walk_id, t_s, x_m, y_m, label — ground truth / landmark fixes (may be empty).
 - ``walks``: walk_id, device_id, user_id, role, source.
@@ -26,10 +29,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
+import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
+from rmbuild.pdr import ImuSignals
+
+
+@dataclass
+class RawImu:
+    """One walk's raw phone IMU as read: the ``signals``, the ``source`` file, and per stream ("acc", "gyro",
+    "yaw") the line (CSV: line, Parquet: row) of each sample in the signals' order, for messages."""
+
+    signals: ImuSignals
+    source: str
+    lines: dict[str, np.ndarray] = field(default_factory=dict)
+    #: "line" for text formats (messages say file:N), "row" for Parquet (file:row N)
+    unit: str = "line"
+
+    def where(self, stream: str, index: int) -> str:
+        """"file:line" of sample ``index`` of ``stream`` (the file alone when lines are unknown)."""
+        ln = self.lines.get(stream)
+        if ln is None or not 0 <= index < len(ln):
+            return self.source
+        return f"{self.source}:{int(ln[index])}" if self.unit == "line" else f"{self.source}:row {int(ln[index])}"
 
 
 @dataclass
@@ -47,6 +71,8 @@ class RawInput:
     truth_extra: dict[str, pd.DataFrame] = field(default_factory=dict)
     #: line/record kind -> count of skipped items (reported as a warning, not an error)
     skipped: dict[str, int] = field(default_factory=dict)
+    #: walk_id -> raw phone IMU of a walk without poses (ingest runs the PDR on it)
+    imu: dict[str, RawImu] = field(default_factory=dict)
     #: human-readable notes for the ingest report (e.g. "dropped 1,234 stale Wi-Fi rows")
     notes: list[str] = field(default_factory=list)
     #: table name -> function(row position) -> "file:line" for error messages

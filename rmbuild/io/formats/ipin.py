@@ -2,7 +2,8 @@
 
 One logfile = one walk (walk_id = file name without extension). ``%`` lines are comments/header; every other
 line is ``TAG;AppTimestamp;...`` with the app timestamp (s) as the common clock. Used tags:
-ACCE, GYRO, AHRS (phone PDR), IMUI (foot-mounted MIMU22BT step increments, preferred when present), WIFI,
+ACCE, GYRO, AHRS (the walk's raw phone IMU: ingest runs the PDR on it), IMUI (foot-mounted MIMU22BT step
+increments, integrated here and preferred when present), WIFI,
 POSI (ground-truth WGS84 fixes, converted to a local ENU frame in metres). MAGN lines are checked but not
 used. Every other tag is skipped with a count. docs/formats-real.md describes the format and the choices.
 """
@@ -23,15 +24,8 @@ import pandas as pd
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.io.formats.base import RawInput, Reader, register
-from rmbuild.pdr import (
-    ImuSignals,
-    poses_from_increments,
-    rotation_vector_quat,
-    run_pdr,
-    yaw_from_azimuth_deg,
-    yaw_from_quat,
-)
+from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.pdr import ImuSignals, poses_from_increments, rotation_vector_quat, yaw_from_azimuth_deg, yaw_from_quat
 
 FORMAT_NAME = "ipin"
 #: tag -> number of ';'-separated fields including the tag (WIFI: at least; the SSID may contain ';')
@@ -41,6 +35,8 @@ KNOWN_UNUSED = (
     "PRES", "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLE4", "BLUE", "RFID", "IMUX", "IMUL",
 )
 _TAG_LINE = re.compile(r"^[A-Z][A-Z0-9]{3};")
+#: characters; a longer line is an error (the IPIN 2023 logfiles' longest line, a header line, has 340)
+MAX_LINE_CHARS = 4096
 _NAME_SUFFIXES = (".txt", ".txt.gz", ".log", ".log.gz", ".csv", ".csv.gz")
 #: our own schema's file names; never a logfile
 _SCHEMA_NAMES = re.compile(
@@ -155,6 +151,9 @@ def parse_logfile(path: Path) -> _Log:
     seen_data = False
     for i, raw in enumerate(text.split("\n"), 1):
         line = raw.rstrip("\r")
+        if len(line) > MAX_LINE_CHARS:
+            raise InputError(f"line of {len(line):,} characters (a logfile line has at most a few hundred; the "
+                             f"limit is {MAX_LINE_CHARS:,})", f"{path}:{i}")
         if not line.strip():
             continue
         if line[0] == "%":
@@ -220,8 +219,10 @@ def parse_logfile(path: Path) -> _Log:
     return log
 
 
-def _imu_signals(log: _Log) -> ImuSignals:
+def raw_imu(log: _Log) -> RawImu:
+    """The phone's raw IMU of a parsed logfile (ACCE, GYRO, AHRS), with the line of every sample."""
     acc, gyr, ahrs = log.num["ACCE"], log.num["GYRO"], log.num["AHRS"]
+    quat = np.zeros((0, 4))
     if len(ahrs):
         rv = ahrs[:, 5:8]
         if np.any(np.sum(rv**2, axis=1) > 1.0 + 1e-3):
@@ -229,16 +230,19 @@ def _imu_signals(log: _Log) -> ImuSignals:
             raise InputError("AHRS: |RotVec| > 1 is not a rotation vector",
                              f"{log.path}:{log.line['AHRS'][j]}")
         if np.any(np.abs(rv) > 0):
-            yaw = yaw_from_quat(rotation_vector_quat(rv))
+            quat = rotation_vector_quat(rv)
+            yaw = yaw_from_quat(quat)
         else:   # no rotation vector recorded: the app's yaw, a compass azimuth in degrees
             yaw = yaw_from_azimuth_deg(ahrs[:, 4])
         accuracy = ahrs[:, 8].astype(np.int64)
     else:
         yaw, accuracy = np.zeros(0), np.zeros(0, dtype=np.int64)
-    return ImuSignals(
+    signals = ImuSignals(
         t_acc_s=acc[:, 0], acc_mps2=acc[:, 2:5], t_yaw_s=ahrs[:, 0] if len(ahrs) else np.zeros(0),
-        yaw_abs_rad=yaw, yaw_accuracy=accuracy, t_gyro_s=gyr[:, 0], gyro_radps=gyr[:, 2:5],
+        yaw_abs_rad=yaw, yaw_accuracy=accuracy, t_gyro_s=gyr[:, 0], gyro_radps=gyr[:, 2:5], quat_xyzw=quat,
     )
+    return RawImu(signals, str(log.path), {"acc": log.line["ACCE"], "gyro": log.line["GYRO"],
+                                           "yaw": log.line["AHRS"]})
 
 
 @register
@@ -281,35 +285,22 @@ class IpinReader(Reader):
                              f"lat {lat0:.9f}, lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg "
                              "set it)")
         walks, poses, wifi, fixes = [], [], [], []
-        wifi_where, fix_where = [], []
+        wifi_where: list[str] = []
+        fix_where: list[str] = []
+        imu: dict[str, RawImu] = {}
         skipped: Counter = Counter()
-        n_imui = n_pdr = 0
         for lg in logs:
             f = lg.path
-            imui = lg.num["IMUI"]
-            use_imui = opts.ipin.use_imui and len(imui) > 0
-            if use_imui:
+            if opts.ipin.use_imui and len(lg.num["IMUI"]) > 0:
                 sp, extra = self._imui_poses(lg, opts)
-                n_imui += 1
+                pf = sp.to_frame(lg.walk_id)
+                for k, v in extra.items():
+                    pf[k] = v
+                poses.append(pf)
             else:
                 if len(lg.num["ACCE"]) < 2:
                     raise InputError("no ACCE (or IMUI) lines: cannot derive steps (no IMU data)", str(f))
-                if len(lg.num["AHRS"]) == 0 and opts.heading_source == "rotation_vector":
-                    raise InputError("no AHRS lines: no heading (pdr.heading_source = 'gyro' uses GYRO "
-                                     "instead)", str(f))
-                if len(lg.num["GYRO"]) < 2 and opts.heading_source == "gyro":
-                    raise InputError("no GYRO lines for pdr.heading_source = 'gyro' ('rotation_vector' "
-                                     "uses AHRS)", str(f))
-                try:
-                    sp = run_pdr(_imu_signals(lg), opts)
-                except ValueError as e:
-                    raise InputError(f"PDR failed: {e}", str(f)) from None
-                extra = {}
-                n_pdr += 1
-            pf = sp.to_frame(lg.walk_id)
-            for k, v in extra.items():
-                pf[k] = v
-            poses.append(pf)
+                imu[lg.walk_id] = raw_imu(lg)
             w = lg.num["WIFI"]
             if len(w) == 0 and opts.ipin.require_wifi:
                 raise InputError("no WIFI lines; pdr.ipin.require_wifi = false keeps Wi-Fi-less walks",
@@ -334,18 +325,18 @@ class IpinReader(Reader):
             walks.append({"walk_id": lg.walk_id, "device_id": lg.device_id, "user_id": "", "role": "",
                           "source": FORMAT_NAME})
             skipped.update(lg.skipped)
-        pose_df = pd.concat(poses, ignore_index=True)
-        if n_imui:
-            notes.append(f"{n_imui} walk(s) use the foot-mounted IMU's step increments (IMUI lines)")
-        if n_pdr:
-            notes.append(f"{n_pdr} walk(s) use phone PDR ({opts.step_detector} steps, {opts.heading_source} "
-                         f"heading, {opts.step_length_model} step length)")
+        pose_df = pd.concat(poses, ignore_index=True) if poses else pd.DataFrame(
+            {c: pd.Series(dtype=object if c == "walk_id" else np.float64)
+             for c in ("walk_id", "step", "t_s", "x_m", "y_m", "heading_rad")})
+        if poses:
+            notes.append(f"{len(poses)} walk(s) use the foot-mounted IMU's step increments (IMUI lines)")
         pw, ps = pose_df["walk_id"].to_numpy(), pose_df["step"].to_numpy()
         return RawInput(
             walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source"]),
             poses=pose_df,
             wifi=pd.concat(wifi, ignore_index=True),
             fixes=pd.concat(fixes, ignore_index=True),
+            imu=imu,
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             merge_duplicate_readings=True,

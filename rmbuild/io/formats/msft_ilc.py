@@ -1,7 +1,7 @@
 """Reader for Microsoft Indoor Location Competition 2.0 traces (``.txt`` / ``.txt.gz``, tab-separated).
 
-One trace = one walk (walk_id = file name without ``.txt``/``.txt.gz``). Phone PDR (:mod:`rmbuild.pdr`) turns
-TYPE_ACCELEROMETER + TYPE_ROTATION_VECTOR (+ TYPE_GYROSCOPE) into per-step poses; TYPE_WIFI rows become
+One trace = one walk (walk_id = file name without ``.txt``/``.txt.gz``). TYPE_ACCELEROMETER, TYPE_GYROSCOPE
+and TYPE_ROTATION_VECTOR are the walk's raw IMU (ingest turns them into per-step poses); TYPE_WIFI rows become
 readings after the stale-row filter; TYPE_WAYPOINT rows are ground-truth fixes in the floor's frame
 (never fed to the optimiser as such). Every other line type is skipped with a count. docs/formats-real.md
 describes the format and the choices made here.
@@ -24,13 +24,18 @@ import pandas as pd
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.io.formats.base import RawInput, Reader, register
-from rmbuild.pdr import ImuSignals, rotation_vector_quat, run_pdr, yaw_from_quat
+from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.pdr import ImuSignals, rotation_vector_quat, yaw_from_quat
 
 FORMAT_NAME = "msft-ilc"
 #: files that sit beside the traces in the published layout; ignored (with a note) when passed in
 COMPANION_FILES = ("floor_info.json", "floor_image.png", "geojson_map.json")
 _DATA_LINE = re.compile(r"^\d{10,16}\tTYPE_[A-Z0-9_]+(\t|$)")
+#: bytes; a longer line is an error (the longest line of the published traces has 134 bytes, an SSID at most
+#: 32): it bounds the parsers' memory, which would otherwise grow with the longest line times the row count
+MAX_LINE_BYTES = 4096
+#: digits of a time field: unix milliseconds have 13 (16 reach the year 318857); more overflow int64
+MAX_TIME_DIGITS = 16
 
 #: line type -> number of tab-separated fields (time, type, values...)
 _USED = {
@@ -108,7 +113,7 @@ class _Rows:
 
     t_ms: np.ndarray
     num: np.ndarray          # (n, k) float64, the type's numeric value fields (see _NUM_COLS)
-    text: np.ndarray         # (n, j) str, the type's text fields (Wi-Fi: ssid, bssid)
+    text: np.ndarray         # (n, j) object (str), the type's text fields (Wi-Fi: ssid, bssid)
     line: np.ndarray
 
 
@@ -145,7 +150,7 @@ def _numeric(table: np.ndarray, linenos: np.ndarray, path: Path, what: str, dtyp
              ) -> np.ndarray:
     """``table`` (n, k) of strings as numbers; a non-numeric / non-finite value -> InputError at its line."""
     try:
-        arr = table.astype(dtype)
+        arr: np.ndarray = table.astype(dtype)
         if dtype is np.float64 and not np.isfinite(arr).all():
             raise ValueError
         return arr
@@ -176,12 +181,14 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
     nl = np.flatnonzero(buf == 10)
     starts = np.concatenate(([0], nl[:-1] + 1))
     ends = nl                                     # exclusive end (the newline)
-    first = buf[starts]
-    data = (first != ord("#")) & (starts < ends)
-    if not data.any():
+    if (ends - starts).max(initial=0) > MAX_LINE_BYTES:
         return None
-    ds, de = starts[data], ends[data]
-    line_no = np.flatnonzero(data) + 1
+    first = buf[starts]
+    is_data = (first != ord("#")) & (starts < ends)
+    if not is_data.any():
+        return None
+    ds, de = starts[is_data], ends[is_data]
+    line_no = np.flatnonzero(is_data) + 1
     tabs = np.flatnonzero(buf == 9)
     k = np.searchsorted(tabs, ds)
     if k.max(initial=0) >= len(tabs):
@@ -189,7 +196,7 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
     tab1 = tabs[k]
     # "<digits>\tTYPE_..." : a tab inside the line, 1-16 digits before it, "TYPE_" after it
     n_dig = tab1 - ds
-    if not ((tab1 < de) & (n_dig > 0) & (n_dig <= 16)).all():
+    if not ((tab1 < de) & (n_dig > 0) & (n_dig <= MAX_TIME_DIGITS)).all():
         return None
     head = buf[np.minimum(ds[:, None] + np.arange(16)[None, :], len(buf) - 1)]
     if not ((head >= 48) & (head <= 57) | (np.arange(16)[None, :] >= n_dig[:, None])).all():
@@ -230,7 +237,7 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
         line = line_no[sel]
         if len(line) == 0:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
-                             np.zeros((0, len(text_cols)), dtype=str), line)
+                             np.zeros((0, len(text_cols)), dtype=object), line)
             continue
         block = buf[byte_code == used.index(typ) + 1].tobytes()
         try:
@@ -246,9 +253,10 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
         if not np.isfinite(num).all():
             return None
         # too few fields: pandas fills the missing ones with "" (text) or NaN (numbers, caught above)
-        if text_cols and (df[text_cols[-1]].to_numpy(dtype=str) == "").any() and nfields - 1 in text_cols:
+        if text_cols and (df[text_cols[-1]].to_numpy(dtype=object) == "").any() and nfields - 1 in text_cols:
             return None
-        txt = df[text_cols].to_numpy(dtype=str) if text_cols else np.zeros((len(df), 0), dtype=str)
+        # text as Python strings: a fixed-width numpy string array would be as wide as the longest cell
+        txt = df[text_cols].to_numpy(dtype=object) if text_cols else np.zeros((len(df), 0), dtype=object)
         out[typ] = _Rows(t_ms, num, txt, line)
     return out, skipped
 
@@ -260,6 +268,9 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
     skipped: Counter = Counter()
     for i, line in enumerate(text.split("\n"), 1):
         line = line.rstrip("\r")
+        if len(line) > MAX_LINE_BYTES:
+            raise InputError(f"line of {len(line):,} characters (a trace line has at most a few hundred; the "
+                             f"limit is {MAX_LINE_BYTES:,})", f"{path}:{i}")
         if not line or line.isspace() or line[0] == "#":
             continue
         parts = line.split("\t")
@@ -269,6 +280,9 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
                                  f"{path}:{i}")
             raise InputError("not a Microsoft ILC trace line (expected '<unix_ms><TAB>TYPE_...'; "
                              "mixed formats?)", f"{path}:{i}")
+        if len(parts[0]) > MAX_TIME_DIGITS:
+            raise InputError(f"time {parts[0][:24]!r} has {len(parts[0])} digits (unix milliseconds have 13; at "
+                             f"most {MAX_TIME_DIGITS})", f"{path}:{i}")
         typ = parts[1]
         bucket = rows.get(typ)
         if bucket is None:
@@ -287,9 +301,9 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
         text_cols = _TEXT_COLS.get(typ, [])
         if not rows[typ]:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
-                             np.zeros((0, len(text_cols)), dtype=str), ln)
+                             np.zeros((0, len(text_cols)), dtype=object), ln)
             continue
-        tab = np.array(rows[typ], dtype=str)
+        tab = np.array(rows[typ], dtype=object)
         t_ms = _numeric(tab[:, :1], ln, path, typ, np.int64)[:, 0]
         num = _numeric(tab[:, _NUM_COLS[typ]], ln, path, typ)
         out[typ] = _Rows(t_ms, num, tab[:, text_cols], ln)
@@ -332,7 +346,7 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
 
     w = rows["TYPE_WIFI"]
     n_stale = 0
-    bssid = np.char.lower(np.char.strip(w.text[:, 1].astype(str))) if len(w.t_ms) else np.zeros(0, dtype=str)
+    bssid = np.array([str(b).strip().lower() for b in w.text[:, 1]], dtype=object)
     empty = np.flatnonzero(bssid == "")
     if len(empty):
         raise InputError("TYPE_WIFI: empty BSSID", f"{path}:{w.line[empty[0]]}")
@@ -394,7 +408,8 @@ class MsftIlcReader(Reader):
                 raise InputError("not a Microsoft ILC trace (expected *.txt or *.txt.gz; mixed formats?)",
                                  str(f))
         seen: dict[str, Path] = {}
-        walks, poses, wifi, fixes = [], [], [], []
+        walks, wifi, fixes = [], [], []
+        imu: dict[str, RawImu] = {}
         wifi_lines, fix_lines = [], []
         skipped: Counter = Counter()
         n_stale = n_wifi = n_dup = 0
@@ -405,23 +420,11 @@ class MsftIlcReader(Reader):
             seen[tr.walk_id] = f
             if len(tr.acc.t_s) < 2:
                 raise InputError("no TYPE_ACCELEROMETER lines: cannot derive steps (no IMU data)", str(f))
-            if len(tr.rot.t_s) == 0 and opts.heading_source == "rotation_vector":
-                raise InputError("no TYPE_ROTATION_VECTOR lines: no heading (pdr.heading_source = 'gyro' "
-                                 "uses the gyroscope instead)", str(f))
             if len(tr.wifi) == 0 and opts.msft_ilc.require_wifi:
                 why = "every row stale" if tr.n_wifi_stale else "no TYPE_WIFI lines"
                 raise InputError(f"no usable Wi-Fi readings ({why}); pdr.msft_ilc.require_wifi = false keeps "
                                  "Wi-Fi-less walks", str(f))
-            imu = ImuSignals(
-                t_acc_s=tr.acc.t_s, acc_mps2=tr.acc.values,
-                t_yaw_s=tr.rot.t_s, yaw_abs_rad=yaw_from_quat(rotation_vector_quat(tr.rot.values)),
-                yaw_accuracy=tr.rot.accuracy, t_gyro_s=tr.gyro.t_s, gyro_radps=tr.gyro.values,
-            )
-            try:
-                steps = run_pdr(imu, opts)
-            except ValueError as e:
-                raise InputError(f"PDR failed: {e}", str(f)) from None
-            poses.append(steps.to_frame(tr.walk_id))
+            imu[tr.walk_id] = raw_imu(tr, f)
             wifi.append(tr.wifi)
             wifi_lines.append(tr.wifi_lines)
             fixes.append(tr.waypoints)
@@ -438,35 +441,40 @@ class MsftIlcReader(Reader):
         if n_dup:
             notes.append(f"merged {n_dup:,} Wi-Fi rows repeating a BSSID within one scan (heard on two channels; "
                          "the most recently seen row kept)")
-        pose_df = pd.concat(poses, ignore_index=True)
-        notes.append(f"PDR: {len(pose_df) - len(poses):,} steps in {len(poses)} walks ({opts.step_detector} "
-                     f"steps, {opts.heading_source} heading, {opts.step_length_model} step length)")
         return RawInput(
             walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source"]),
-            poses=pose_df,
+            poses=pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64)
+                                for c in ("walk_id", "t_s", "x_m", "y_m", "heading_rad")}),
             wifi=pd.concat(wifi, ignore_index=True),
             fixes=pd.concat(fixes, ignore_index=True),
+            imu=imu,
             skipped=dict(sorted(skipped.items())),
             notes=notes,
-            where=where_functions(seen, pose_df, walks, wifi, wifi_lines, fixes, fix_lines),
+            where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines),
         )
 
 
-def where_functions(paths: dict[str, Path], pose_df: pd.DataFrame, walks: list[dict],
-                    wifi: list[pd.DataFrame], wifi_lines: list[np.ndarray], fixes: list[pd.DataFrame],
-                    fix_lines: list[np.ndarray]) -> dict:
-    """``RawInput.where``: row position -> "file:line" (poses: "file (PDR step k)")."""
+def raw_imu(tr: _Trace, path: Path) -> RawImu:
+    """The raw IMU of a parsed trace, with the line of every sample."""
+    q = rotation_vector_quat(tr.rot.values)
+    signals = ImuSignals(
+        t_acc_s=tr.acc.t_s, acc_mps2=tr.acc.values, t_yaw_s=tr.rot.t_s, yaw_abs_rad=yaw_from_quat(q),
+        yaw_accuracy=tr.rot.accuracy, t_gyro_s=tr.gyro.t_s, gyro_radps=tr.gyro.values, quat_xyzw=q,
+    )
+    return RawImu(signals, str(path), {"acc": tr.acc.line, "gyro": tr.gyro.line, "yaw": tr.rot.line})
+
+
+def where_functions(paths: dict[str, Path], walks: list[dict], wifi: list[pd.DataFrame],
+                    wifi_lines: list[np.ndarray], fixes: list[pd.DataFrame], fix_lines: list[np.ndarray]) -> dict:
+    """``RawInput.where``: row position -> "file:line"."""
     wfile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]) if len(d) else "", dtype=object)
                             for d in wifi]) if wifi else np.zeros(0, dtype=object)
     wline = np.concatenate(wifi_lines) if wifi_lines else np.zeros(0, dtype=np.int64)
     ffile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]) if len(d) else "", dtype=object)
                             for d in fixes]) if fixes else np.zeros(0, dtype=object)
     fline = np.concatenate(fix_lines) if fix_lines else np.zeros(0, dtype=np.int64)
-    pw = pose_df["walk_id"].to_numpy()
-    ps = pose_df["step"].to_numpy()
     return {
         "walks": lambda i: str(paths[walks[i]["walk_id"]]),
-        "poses": lambda i: f"{paths[pw[i]]} (PDR step {ps[i]})",
         "wifi": lambda i: f"{wfile[i]}:{wline[i]}",
         "fixes": lambda i: f"{ffile[i]}:{fline[i]}",
     }

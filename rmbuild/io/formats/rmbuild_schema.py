@@ -19,7 +19,8 @@ import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.errors import InputError
-from rmbuild.io.formats.base import RawInput, Reader, register
+from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "fixes", "imu")
 TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks")
@@ -187,11 +188,37 @@ def _column(df: pd.DataFrame, name: str, rows: np.ndarray) -> np.ndarray:
     return df[name].to_numpy(float)[rows] if name in df.columns else np.full(len(rows), np.nan)
 
 
-class _PdrLocated(_Located):
-    """Poses derived by the PDR: rows are named by the IMU file and step."""
-
-    def where(self, i: int) -> str:
-        return f"{self.path} (PDR step {int(self.df['step'].iloc[i])} of walk {self.df['walk_id'].iloc[i]})"
+def _read_imu(files: list[Path]) -> dict[str, RawImu]:
+    """Each walk's raw phone IMU from the ``imu`` files (times must increase within a walk)."""
+    out: dict[str, RawImu] = {}
+    for f in files:
+        loc = _Located(f, _read_file(f))
+        _check_columns(loc, IMU_REQ, IMU_OPT)
+        _coerce(loc, {**IMU_REQ, **IMU_OPT})
+        df = loc.df
+        first = 2 if loc.csv else 1   # CSV line of row 0 (after the header) / Parquet row number
+        for wid, rows in df.groupby("walk_id", sort=False).indices.items():
+            if wid in out:
+                raise InputError(f"imu: walk {wid!r} also in {out[wid].source}", loc.where(int(rows[0])))
+            t = df["t_s"].to_numpy(float)[rows]
+            back = np.flatnonzero(np.diff(t) <= 0)
+            if len(back):
+                raise InputError(f"imu: time not increasing in walk {wid!r}", loc.where(int(rows[back[0] + 1])))
+            acc = np.column_stack([_column(df, f"acc_{c}_mps2", rows) for c in "xyz"])
+            gyro = np.column_stack([_column(df, f"gyro_{c}_radps", rows) for c in "xyz"])
+            g_ok = np.isfinite(gyro).all(axis=1)
+            yaw = _column(df, "yaw_abs_rad", rows)
+            y_ok = np.isfinite(yaw)
+            flag = _column(df, "yaw_accuracy", rows)
+            signals = ImuSignals(
+                t_acc_s=t, acc_mps2=acc, t_yaw_s=t[y_ok], yaw_abs_rad=yaw[y_ok],
+                yaw_accuracy=np.nan_to_num(flag[y_ok], nan=-1.0).astype(np.int64),
+                t_gyro_s=t[g_ok], gyro_radps=gyro[g_ok],
+            )
+            lines = rows + first
+            out[str(wid)] = RawImu(signals, str(f), {"acc": lines, "gyro": lines[g_ok], "yaw": lines[y_ok]},
+                                   "line" if loc.csv else "row")
+    return out
 
 
 @register
@@ -231,11 +258,11 @@ class RmbuildSchemaReader(Reader):
             if mode is POSE_INC:
                 loc.df = _integrate_increments(loc.df)
             parts.append(loc)
-        if "imu" in by_table:
-            have_poses = {w for p in parts for w in p.df["walk_id"].unique()}
-            parts.extend(self._poses_from_imu(by_table["imu"], have_poses))
-        poses, where["poses"] = _concat(parts)
-        pdr_parts = [p for p in parts if isinstance(p, _PdrLocated)]
+        imu = _read_imu(by_table.get("imu", []))
+        if parts:
+            poses, where["poses"] = _concat(parts)
+        else:
+            poses = pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64) for c in POSE_ABS})
 
         tables: dict[str, pd.DataFrame] = {}
         for t in ("wifi", "fixes", "walks", "truth/poses"):
@@ -254,7 +281,7 @@ class RmbuildSchemaReader(Reader):
         fixes = tables.get("fixes", pd.DataFrame({c: [] for c in ("walk_id", "t_s", "x_m", "y_m", "label")}))
         walks = tables.get("walks")
         if walks is None:
-            ids = pd.unique(poses["walk_id"])
+            ids = pd.unique(np.r_[poses["walk_id"].to_numpy(dtype=object), np.array(list(imu), dtype=object)])
             walks = pd.DataFrame({"walk_id": ids, "device_id": "", "user_id": "", "role": ""})
         else:
             bad_role = ~walks.get("role", pd.Series("", index=walks.index)).isin(ROLES)
@@ -269,15 +296,11 @@ class RmbuildSchemaReader(Reader):
             wifi=wifi,
             fixes=fixes,
             truth_poses=tables.get("truth/poses"),
+            imu=imu,
             where=where,
         )
         if skipped:
             raw.skipped["unrecognised file"] = skipped
-        if pdr_parts:
-            n_steps = sum(len(p.df) - 1 for p in pdr_parts)
-            opts = self.options
-            raw.notes.append(f"PDR on raw IMU: {n_steps:,} steps in {len(pdr_parts)} walks ({opts.step_detector} "
-                             f"steps, {opts.heading_source} heading, {opts.step_length_model} step length)")
         for t, fs in by_table.items():
             if t == "truth/provenance":
                 continue
@@ -294,41 +317,3 @@ class RmbuildSchemaReader(Reader):
                 else:
                     raw.truth_extra[name] = df
         return raw
-
-    def _poses_from_imu(self, files: list[Path], walks_with_poses: set) -> list[_Located]:
-        """Run the PDR on each walk's raw phone IMU; a walk may have poses or IMU, not both."""
-        from rmbuild.pdr import ImuSignals, run_pdr
-
-        opts = self.options
-        out: list[_Located] = []
-        for f in files:
-            loc = _Located(f, _read_file(f))
-            _check_columns(loc, IMU_REQ, IMU_OPT)
-            _coerce(loc, {**IMU_REQ, **IMU_OPT})
-            df = loc.df
-            for wid, rows in df.groupby("walk_id", sort=False).indices.items():
-                if wid in walks_with_poses:
-                    raise InputError(f"walk {wid!r} has both poses and raw IMU; give one of them", loc.where(
-                        int(rows[0])))
-                t = df["t_s"].to_numpy(float)[rows]
-                back = np.flatnonzero(np.diff(t) <= 0)
-                if len(back):
-                    raise InputError(f"imu: time not increasing in walk {wid!r}", loc.where(int(rows[back[0] + 1])))
-
-                acc = np.column_stack([_column(df, f"acc_{c}_mps2", rows) for c in "xyz"])
-                gyro = np.column_stack([_column(df, f"gyro_{c}_radps", rows) for c in "xyz"])
-                g_ok = np.isfinite(gyro).all(axis=1)
-                yaw = _column(df, "yaw_abs_rad", rows)
-                y_ok = np.isfinite(yaw)
-                acc_flag = _column(df, "yaw_accuracy", rows)
-                imu = ImuSignals(
-                    t_acc_s=t, acc_mps2=acc, t_yaw_s=t[y_ok], yaw_abs_rad=yaw[y_ok],
-                    yaw_accuracy=np.nan_to_num(acc_flag[y_ok], nan=-1.0).astype(np.int64),
-                    t_gyro_s=t[g_ok], gyro_radps=gyro[g_ok],
-                )
-                try:
-                    steps = run_pdr(imu, opts)
-                except ValueError as e:
-                    raise InputError(f"PDR failed for walk {wid!r}: {e}", str(f)) from None
-                out.append(_PdrLocated(f, steps.to_frame(str(wid))))
-        return out
