@@ -148,6 +148,7 @@ def parse_logfile(path: Path) -> _Log:
     lnos: dict[str, list[int]] = {t: [] for t in _FIELDS}
     wifi_text: list[tuple[str, str]] = []
     manufacturer = model = ""
+    created = math.nan
     seen_data = False
     for i, raw in enumerate(text.split("\n"), 1):
         line = raw.rstrip("\r")
@@ -163,6 +164,9 @@ def parse_logfile(path: Path) -> _Log:
             m = re.match(r"^%\s*Manufacturer:\s*(.*?)\s*$", line)
             if m:
                 manufacturer = m.group(1)
+            m = re.match(r"^%\s*Date of creation:\s*(.*?)\s*$", line)
+            if m:
+                created = _creation_epoch(m.group(1))
             continue
         where = f"{path}:{i}"
         if not _TAG_LINE.match(line):
@@ -207,9 +211,15 @@ def parse_logfile(path: Path) -> _Log:
     if not seen_data:
         raise InputError("no data lines (empty or header-only logfile)", str(path))
     log.device_id = " ".join(x for x in (manufacturer, model) if x)
+    # app times count from the recording's start; the header's creation time (1 s) makes them absolute, so
+    # one device's consecutive logfiles line up in time (session continuity)
+    epoch = created if math.isfinite(created) else 0.0
+    log.t_first += epoch
     for tag in _FIELDS:
         arr = np.asarray(rows[tag], dtype=np.float64).reshape(len(rows[tag]), -1) if rows[tag] else \
             np.zeros((0, 4 if tag == "WIFI" else _FIELDS[tag] - 1))
+        if len(arr):
+            arr[:, 0] += epoch
         ln = np.asarray(lnos[tag], dtype=np.int64)
         o = np.argsort(arr[:, 0], kind="stable") if len(arr) else np.zeros(0, dtype=np.int64)
         log.num[tag], log.line[tag] = arr[o], ln[o]
@@ -217,6 +227,20 @@ def parse_logfile(path: Path) -> _Log:
             log.wifi_text = [wifi_text[j] for j in o]
     log.skipped.update({"MAGN": len(log.num["MAGN"])} if len(log.num["MAGN"]) else {})
     return log
+
+
+def _creation_epoch(text: str) -> float:
+    """Epoch seconds of a header date like 'Wed Jun 14 14:46:22 GMT+02:00 2023' (NaN when unreadable)."""
+    from datetime import datetime
+
+    m = re.match(r"^\w{3} (\w{3} \d{1,2} \d{2}:\d{2}:\d{2}) (?:GMT|UTC)([+-]\d{2}):?(\d{2}) (\d{4})$", text)
+    if not m:
+        return math.nan
+    try:
+        dt = datetime.strptime(f"{m.group(1)} {m.group(4)} {m.group(2)}{m.group(3)}", "%b %d %H:%M:%S %Y %z")
+    except ValueError:
+        return math.nan
+    return dt.timestamp()
 
 
 def raw_imu(log: _Log) -> RawImu:
