@@ -38,25 +38,37 @@ SUMMARIES = {
 
 
 class LazyGroup(click.Group):
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return [name for name in COMMANDS if self._available(name)]
+    """Imports a command's module only when the command runs (or its help is shown). A module that fails
+    to import is an error naming the command, never a command that silently disappears."""
 
-    @staticmethod
-    def _available(name: str) -> bool:
-        mod = COMMANDS[name].split(":")[0]
-        return importlib.util.find_spec(mod) is not None
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name not in COMMANDS or not self._available(name):
+        if name not in COMMANDS:
             return None
-        mod, attr = COMMANDS[name].split(":")
-        return getattr(importlib.import_module(mod), attr)
+        return load_command(name)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(n, SUMMARIES.get(n, "")) for n in self.list_commands(ctx)]
         if rows:
             with formatter.section("Commands"):
                 formatter.write_dl(rows)
+
+
+def load_command(name: str) -> click.Command:
+    """The click command ``name`` of :data:`COMMANDS`; RmbuildError when its module cannot be imported."""
+    from rmbuild.errors import RmbuildError
+
+    mod, attr = COMMANDS[name].split(":")
+    try:
+        cmd = getattr(importlib.import_module(mod), attr)
+    except (ImportError, AttributeError) as e:
+        raise RmbuildError(f"command {name!r} is broken: {type(e).__name__}: {e} (module {mod}); "
+                           "reinstall rmbuild") from None
+    if not isinstance(cmd, click.Command):
+        raise RmbuildError(f"command {name!r} is broken: {COMMANDS[name]} is not a click command")
+    return cmd
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -81,7 +93,7 @@ def setup_logging(verbose: int, quiet: bool) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script: runs the group, turns errors into one line + exit code."""
-    from rmbuild.errors import RmbuildError
+    from rmbuild.errors import RmbuildError, one_line
 
     try:
         cli.main(args=argv, prog_name="rmbuild", standalone_mode=False)
@@ -92,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
         e.show()
         sys.exit(2 if e.exit_code in (1, 2) else e.exit_code)
     except RmbuildError as e:
-        click.echo(f"error: {e}", err=True)
+        click.echo(f"error: {one_line(str(e))}", err=True)
         sys.exit(e.exit_code)
     except KeyboardInterrupt:
         click.echo("interrupted; no partial outputs were kept", err=True)
@@ -101,6 +113,7 @@ def main(argv: list[str] | None = None) -> None:
         args = sys.argv[1:] if argv is None else argv
         if any(a in ("-v", "-vv", "--verbose") for a in args):
             raise
-        click.echo(f"internal error: {type(e).__name__}: {e} (re-run with -v for the traceback)", err=True)
+        click.echo(f"internal error: {type(e).__name__}: {one_line(str(e))[:500]} (re-run with -v for the traceback)",
+                   err=True)
         sys.exit(1)
     sys.exit(0)

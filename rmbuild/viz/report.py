@@ -3,7 +3,7 @@
 :func:`build_report` reads what the workspace holds (any stage may be missing) and returns the page and
 its figures in memory; :func:`rmbuild.stages.report.run` writes them. Figures: walks before/after the
 optimisation over the floor plan, heat maps of the strongest APs, CDFs of every localizer and map, the
-optimiser's cost; tables: key figures (reports/*.json) and the config each stage ran with.
+optimiser's cost; tables: key figures (each stage's report.json) and the config each stage ran with.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ import numpy as np
 import pandas as pd
 
 from rmbuild import __version__
-from rmbuild.io.workspace import STAGE_DIRS, Workspace
+from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.viz import figures
 from rmbuild.viz.align import apply, frame_to_truth, per_walk_to_truth
 
 log = logging.getLogger(__name__)
 
-#: (stage, dotted key in reports/<stage>.json, label) shown in the key-figures table when present
+#: (stage, dotted key in the stage's report.json, label) shown in the key-figures table when present
 KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("ingest", "walks", "walks"),
     ("ingest", "poses", "poses (steps)"),
@@ -164,6 +164,10 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
     missing: dict[str, str] = {}
     sections: list[str] = []
     reports = {s: ws.read_report(s) for s in STAGE_DIRS}
+    for s in STAGE_DIRS:
+        if stale := ws.stale_inputs(s):
+            missing[f"{s} (stale)"] = (f"{STAGE_COMMANDS[s]} ran on an earlier run of {', '.join(stale)}: its "
+                                       f"figures may not match; re-run `rmbuild {STAGE_COMMANDS[s]} --force`")
     ds = ws.read_dataset()
     walls = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
     walls = walls if len(walls) else None
@@ -253,14 +257,16 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
         if rep is None:
             continue
         flat = [(k, _fmt(v)) for k, v in _flatten(rep).items() if k]
-        details.append(f"<details><summary>reports/{html.escape(stage)}.json ({len(flat)} values)</summary>"
+        rel = ARTEFACTS[f"{STAGE_DIRS[stage]}.report"]
+        details.append(f"<details><summary>{html.escape(rel)} ({len(flat)} values)</summary>"
                        f"{_table(flat, ('key', 'value'))}</details>")
     configs = []
     for stage, d in STAGE_DIRS.items():
-        p = ws.root / d / "config.toml"
-        if p.is_file():
-            configs.append(f"<h3>{html.escape(stage)} <span class=\"meta\">({html.escape(d)}/config.toml)</span></h3>"
-                           f"<pre>{html.escape(p.read_text())}</pre>")
+        text = ws.read_config_text(stage)
+        if text is not None:
+            rel = ARTEFACTS[f"{d}.config"]
+            configs.append(f"<h3>{html.escape(stage)} <span class=\"meta\">({html.escape(rel)})</span></h3>"
+                           f"<pre>{html.escape(text)}</pre>")
 
     # ---------------------------------------------------------------- page
     def fig_html(f: ReportFigure) -> str:

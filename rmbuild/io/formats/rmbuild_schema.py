@@ -7,9 +7,12 @@ Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``fixes*`` (``.
 
 from __future__ import annotations
 
+import csv
 import difflib
 import gzip
+import io
 import json
+import os
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -18,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
-from rmbuild.errors import InputError
+from rmbuild.errors import InputError, one_line
 from rmbuild.io.formats.base import RawInput, Reader, register
 
 TABLES = ("walks", "poses", "wifi", "fixes", "imu")
@@ -72,6 +75,18 @@ def _table_of(p: Path) -> str | None:
     return None
 
 
+#: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
+NUMERIC_NA = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "null", "NULL", "None", "<NA>"]
+
+
+def _common_dir(files: list[Path]) -> str:
+    """The directory holding all ``files`` (for errors about the set of inputs)."""
+    try:
+        return os.path.commonpath([str(f.parent) for f in files]) if files else "(no input files)"
+    except ValueError:  # relative and absolute paths mixed
+        return str(files[0].parent)
+
+
 class _Located:
     """A table read from one file with a way to name its rows: 'file:line' (CSV) or 'file:row N'."""
 
@@ -79,47 +94,103 @@ class _Located:
         self.path = path
         self.df = df
         self.csv = _suffix(path) != ".parquet"
+        self._lines: list[int] | None = None
 
     def where(self, i: int) -> str:
-        return f"{self.path}:{i + 2}" if self.csv else f"{self.path}:row {i + 1}"
+        if not self.csv:
+            return f"{self.path}:row {i + 1}"
+        if self._lines is None:  # only when an error is reported: find the line each record starts on
+            self._lines = _record_lines(self.path)
+        return f"{self.path}:{self._lines[i]}" if 0 <= i < len(self._lines) else f"{self.path}:record {i + 1}"
 
 
-def _read_file(path: Path) -> pd.DataFrame:
+def _open_text(path: Path) -> io.TextIOBase:
+    raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
+    return io.TextIOWrapper(raw, encoding="utf-8", errors="replace", newline="")
+
+
+def _record_lines(path: Path) -> list[int]:
+    """The physical line on which each data record of a CSV file starts (blank lines skipped like pandas;
+    quoted fields may span lines)."""
+    out: list[int] = []
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        line = 1
+        header = True
+        for row in reader:
+            if row and not header:
+                out.append(line)
+            header = header and not row
+            line = reader.line_num + 1
+    return out
+
+
+def _bad_utf8_line(path: Path) -> str:
+    """'line N' of the first line that is not UTF-8 ('' when it cannot be told)."""
+    try:
+        raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
+        with raw:
+            for n, line in enumerate(raw, 1):
+                try:
+                    line.decode("utf-8")
+                except UnicodeDecodeError as e:
+                    return f"{n}: byte {e.start + 1} of the line"
+    except (OSError, EOFError, zlib.error):
+        pass
+    return ""
+
+
+def read_located(path: Path, required: dict[str, str] | None = None,
+                 optional: dict[str, str] | None = None) -> _Located:
+    """Read one table file; string columns of the schema stay text ("00001", "NA"), numeric ones are numbers."""
+    return _Located(path, _read_file(path, {**(required or {}), **(optional or {})}))
+
+
+def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame:
     try:
         if _suffix(path) == ".parquet":
             return pd.read_parquet(path)
-        return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""])
+        if schema is None:
+            return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""])
+        strs = [c for c, k in schema.items() if k == "str"]
+        return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
+                           na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"})
     except pd.errors.EmptyDataError:
         raise InputError("empty file (no header)", str(path)) from None
     except pd.errors.ParserError as e:
-        raise InputError(f"malformed CSV ({str(e).splitlines()[0]})", str(path)) from None
+        raise InputError(f"malformed CSV ({one_line(str(e))})", str(path)) from None
     except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as e:
         kind = "gzip" if str(path).endswith(".gz") else "file"
         raise InputError(f"unreadable {kind} ({type(e).__name__}: {e})", str(path)) from None
     except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", str(path)) from None
+        line = _bad_utf8_line(path)
+        where = f"{path}:{line.split(':')[0]}" if line else str(path)
+        what = f" ({line.split(': ', 1)[1]})" if line else ""
+        raise InputError(f"not UTF-8 text{what}: {e.reason}", where) from None
+    except MemoryError:
+        raise InputError("file too large to read into memory", str(path)) from None
     except Exception as e:  # pyarrow raises ArrowInvalid and friends for corrupt Parquet
         raise InputError(f"unreadable Parquet ({type(e).__name__}: {e})", str(path)) from None
 
 
-def _check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
+def check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
     cols = [str(c) for c in loc.df.columns]
     known = list(required) + list(optional)
     for c in cols:
         if c not in known:
             near = difflib.get_close_matches(c, known, n=1)
             hint = f"; did you mean {near[0]!r}?" if near else f" (known: {', '.join(known)})"
-            raise InputError(f"unknown column {c!r}{hint}", str(loc.path))
+            raise InputError(f"unknown column {c[:80]!r}{hint}", f"{loc.path}:1" if loc.csv else str(loc.path))
     for c in required:
         if c not in cols:
             near = difflib.get_close_matches(c, cols, n=1)
-            hint = f" (found {near[0]!r}: misspelt?)" if near else f" (found: {', '.join(cols) or 'none'})"
-            raise InputError(f"missing required column {c!r}{hint}", str(loc.path))
+            hint = f" (found {near[0]!r}: misspelt?)" if near else f" (found: {', '.join(cols)[:200] or 'none'})"
+            raise InputError(f"missing required column {c!r}{hint}", f"{loc.path}:1" if loc.csv else str(loc.path))
     if len(loc.df) == 0:
         raise InputError("no data rows", str(loc.path))
 
 
-def _coerce(loc: _Located, columns: dict[str, str]) -> None:
+def coerce(loc: _Located, columns: dict[str, str]) -> None:
     """Check types and finiteness column by column; convert in place."""
     df = loc.df
     for c, kind in columns.items():
@@ -127,18 +198,19 @@ def _coerce(loc: _Located, columns: dict[str, str]) -> None:
             continue
         s = df[c]
         if kind == "str":
-            bad = s.isna().to_numpy()
+            # Parquet may hold None; ids given as numbers in a typed file become their text ("1")
+            text = s.where(~s.isna(), "").astype(str)
+            bad = (text.str.strip() == "").to_numpy()
             if c in ("walk_id", "bssid") and bad.any():
                 raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
-            # ids read by pandas as numbers ("1") become strings; floats like 1.0 keep their text form
-            df[c] = s.where(~s.isna(), "").astype(str)
+            df[c] = text
             continue
         if not pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
             num = pd.to_numeric(s, errors="coerce")
             bad = (num.isna() & s.notna()).to_numpy()
             if bad.any():
                 i = int(np.argmax(bad))
-                raise InputError(f"column {c}: not a number: {s.iloc[i]!r}", loc.where(i))
+                raise InputError(f"column {c}: not a number: {str(s.iloc[i])[:60]!r}", loc.where(i))
             s = num
         v = s.to_numpy(dtype=np.float64)
         nan = np.isnan(v)
@@ -213,21 +285,22 @@ class RmbuildSchemaReader(Reader):
                 skipped += 1
                 continue
             by_table.setdefault(t, []).append(f)
+        inputs = _common_dir(files)
         if "wifi" not in by_table:
-            raise InputError("no wifi file among the inputs (expected a file named wifi*.csv or .parquet)")
+            raise InputError("no wifi file among the inputs (expected a file named wifi*.csv or .parquet)", inputs)
         if "poses" not in by_table and "imu" not in by_table:
             raise InputError("no poses file among the inputs (expected poses*.csv or .parquet, or raw phone "
-                             "IMU in imu*.csv or .parquet)")
+                             "IMU in imu*.csv or .parquet)", inputs)
         where: dict[str, Callable[[int], str]] = {}
 
         # poses: absolute or increments, one mode per file
         parts = []
         for f in by_table.get("poses", []):
-            loc = _Located(f, _read_file(f))
+            loc = read_located(f, {**POSE_ABS, **POSE_INC, **POSE_OPT})
             cols = set(map(str, loc.df.columns))
             mode = POSE_INC if ("step_length_m" in cols or "dheading_rad" in cols) else POSE_ABS
-            _check_columns(loc, mode, POSE_OPT)
-            _coerce(loc, {**mode, **POSE_OPT})
+            check_columns(loc, mode, POSE_OPT)
+            coerce(loc, {**mode, **POSE_OPT})
             if mode is POSE_INC:
                 loc.df = _integrate_increments(loc.df)
             parts.append(loc)
@@ -244,9 +317,9 @@ class RmbuildSchemaReader(Reader):
             req, opt = SCHEMAS[t]
             parts = []
             for f in by_table[t]:
-                loc = _Located(f, _read_file(f))
-                _check_columns(loc, req, opt)
-                _coerce(loc, {**req, **opt})
+                loc = read_located(f, req, opt)
+                check_columns(loc, req, opt)
+                coerce(loc, {**req, **opt})
                 parts.append(loc)
             tables[t], where[t] = _concat(parts)
 
@@ -302,9 +375,9 @@ class RmbuildSchemaReader(Reader):
         opts = self.options
         out: list[_Located] = []
         for f in files:
-            loc = _Located(f, _read_file(f))
-            _check_columns(loc, IMU_REQ, IMU_OPT)
-            _coerce(loc, {**IMU_REQ, **IMU_OPT})
+            loc = read_located(f, IMU_REQ, IMU_OPT)
+            check_columns(loc, IMU_REQ, IMU_OPT)
+            coerce(loc, {**IMU_REQ, **IMU_OPT})
             df = loc.df
             for wid, rows in df.groupby("walk_id", sort=False).indices.items():
                 if wid in walks_with_poses:
