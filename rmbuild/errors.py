@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+#: characters; a message longer than this is cut in the middle (it may quote a huge value from a file)
+MAX_MESSAGE = 600
+
 
 def one_line(text: str) -> str:
-    """``text`` with line breaks folded into "; " (third-party messages, e.g. pyarrow's, span lines)."""
-    return "; ".join(part.strip() for part in str(text).splitlines() if part.strip())
+    """``text`` with line breaks folded into "; " (third-party messages, e.g. pyarrow's, span lines) and
+    cut to :data:`MAX_MESSAGE` characters."""
+    s = "; ".join(part.strip() for part in str(text).splitlines() if part.strip())
+    if len(s) > MAX_MESSAGE:
+        s = f"{s[:MAX_MESSAGE * 2 // 3]} [... {len(s) - MAX_MESSAGE:,} characters ...] {s[-MAX_MESSAGE // 3:]}"
+    return s
 
 
 class RmbuildError(Exception):

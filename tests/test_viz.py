@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
 import pytest
-from typing import Protocol
 from cli_util import run_cli
 from test_viz_util import DOC_IMG, WRITE_DOC_IMAGES, build_workspace
 

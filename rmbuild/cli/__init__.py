@@ -97,8 +97,8 @@ def main(argv: list[str] | None = None) -> None:
 
     try:
         cli.main(args=argv, prog_name="rmbuild", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
+    except (click.exceptions.Abort, KeyboardInterrupt):  # click turns Ctrl-C into Abort
+        click.echo("interrupted; no partial outputs were kept", err=True)
         sys.exit(130)
     except click.ClickException as e:
         e.show()
@@ -106,9 +106,6 @@ def main(argv: list[str] | None = None) -> None:
     except RmbuildError as e:
         click.echo(f"error: {one_line(str(e))}", err=True)
         sys.exit(e.exit_code)
-    except KeyboardInterrupt:
-        click.echo("interrupted; no partial outputs were kept", err=True)
-        sys.exit(130)
     except Exception as e:  # an internal failure: one line, the traceback only with -v
         args = sys.argv[1:] if argv is None else argv
         if any(a in ("-v", "-vv", "--verbose") for a in args):

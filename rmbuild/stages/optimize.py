@@ -7,6 +7,7 @@ import math
 import resource
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -57,14 +58,14 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         anchors = read_anchors(anchors_path)
         check_anchors(anchors, ds, cfg.solve.anchor_max_gap_s)
     ws.check_can_write("optimize", force)
-    state = {"phase": None}
+    state: dict[str, Any] = {"phase": None, "iter": 0}
 
     def on_progress(phase: str, info: dict) -> None:
         if phase != state["phase"]:
             state["phase"] = phase
             progress.phase(phase, info.get("total"))
         if phase == "solve" and "cost_after" in info:
-            state["iter"] = state.get("iter", 0) + 1
+            state["iter"] += 1
             viewer.log_cost(state["iter"], float(info["cost_after"]))
             progress.message(f"outer {info.get('outer')} iteration {info.get('iteration')}: "
                              f"cost {info['cost_after']:.4g}")

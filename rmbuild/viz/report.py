@@ -13,6 +13,7 @@ import html
 import io
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -125,7 +126,7 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _table(rows: list[tuple[str, ...]], header: tuple[str, ...]) -> str:
+def _table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...]) -> str:
     h = "".join(f"<th>{html.escape(c)}</th>" for c in header)
     body = "".join(
         "<tr>" + "".join(
@@ -169,8 +170,8 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
             missing[f"{s} (stale)"] = (f"{STAGE_COMMANDS[s]} ran on an earlier run of {', '.join(stale)}: its "
                                        f"figures may not match; re-run `rmbuild {STAGE_COMMANDS[s]} --force`")
     ds = ws.read_dataset()
-    walls = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
-    walls = walls if len(walls) else None
+    wall_xy = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
+    walls = wall_xy if len(wall_xy) else None
     walk_ids = ds.walk_ids()
 
     # ---------------------------------------------------------------- walks

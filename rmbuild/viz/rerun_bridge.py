@@ -28,7 +28,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -226,8 +228,10 @@ class RerunViewer:
         self.rec = self.rr.RecordingStream(APPLICATION_ID, make_default=False)
         if target.mode == "save":
             assert target.path is not None
-            target.path.parent.mkdir(parents=True, exist_ok=True)
-            self._tmp_path = target.path.with_name(f".{target.path.name}.{os.getpid()}.tmp")
+            # recorded outside the target's directory (ingest replaces the workspace that will hold it)
+            fd, tmp = tempfile.mkstemp(prefix="rmbuild-", suffix=".rrd")
+            os.close(fd)
+            self._tmp_path = Path(tmp)
             self.rec.save(self._tmp_path)
         elif target.mode == "spawn":
             with _env(XDG_CONFIG_HOME=str(_private_rerun_config()), TELEMETRY_ENABLED="false"):
@@ -265,7 +269,7 @@ class RerunViewer:
         self.rec.disconnect()  # closes the file sink
         assert self._tmp_path is not None and self.target.path is not None
         if keep:
-            os.replace(self._tmp_path, self.target.path)
+            _move_into_place(self._tmp_path, self.target.path)
             return self.target.path
         self._tmp_path.unlink(missing_ok=True)
         return None
@@ -337,7 +341,7 @@ class RerunViewer:
                      static=True)
         self._count("walls", len(strips))
 
-    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float],
+    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
                       parts: Sequence[str] = ALIGNED_PARTS) -> None:
         """Place the optimiser's frame in the building frame: ``building = R(theta) @ map + t``.
 
@@ -623,6 +627,23 @@ class RerunViewer:
         """A markdown note (e.g. a stage's summary) at ``notes/<path>``."""
         self.rec.log(f"notes/{path}", self.rr.TextDocument(text, media_type=self.rr.MediaType.MARKDOWN),
                      static=True)
+
+
+def _move_into_place(src: Path, dst: Path) -> None:
+    """Move ``src`` to ``dst`` so that ``dst`` is never half written (copy beside it, then rename)."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.replace(src, dst)
+        return
+    except OSError:  # another file system
+        pass
+    part = dst.with_name(f".{dst.name}.{os.getpid()}.part")
+    try:
+        shutil.copyfile(src, part)
+        os.replace(part, dst)
+    finally:
+        part.unlink(missing_ok=True)
+        src.unlink(missing_ok=True)
 
 
 def _find_xy(df: pd.DataFrame, x_names: Sequence[str]) -> tuple[str, str] | None:

@@ -71,7 +71,7 @@ class Viewer(Protocol):
 
     def log_venue(self, venue: dict | None) -> None: ...
 
-    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float],
+    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
                       parts: Sequence[str] = ALIGNED_PARTS) -> None: ...
 
     def log_vicinity(self, pairs: pd.DataFrame, node_xy: np.ndarray, max_lines: int = MAX_VICINITY_LINES,
@@ -133,7 +133,7 @@ class NullViewer:
     def log_venue(self, venue: dict | None) -> None:
         pass
 
-    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float],
+    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
                       parts: Sequence[str] = ALIGNED_PARTS) -> None:
         pass
 

@@ -13,6 +13,8 @@ import gzip
 import io
 import json
 import os
+import re
+import warnings
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -113,6 +115,7 @@ def _record_lines(path: Path) -> list[int]:
     """The physical line on which each data record of a CSV file starts (blank lines skipped like pandas;
     quoted fields may span lines)."""
     out: list[int] = []
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))  # a cell may be as long as the file
     with _open_text(path) as fh:
         reader = csv.reader(fh, skipinitialspace=True)
         line = 1
@@ -140,6 +143,21 @@ def _bad_utf8_line(path: Path) -> str:
     return ""
 
 
+def _long_record(path: Path) -> tuple[str, str]:
+    """(problem, where) of the first record with more fields than the header."""
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        width, line = None, 1
+        for row in reader:
+            if row and width is None:
+                width = len(row)
+            elif row and width is not None and len(row) > width:
+                return f"{len(row)} fields, the header has {width}", f"{path}:{line}"
+            line = reader.line_num + 1
+    return "more fields than the header", str(path)
+
+
 def read_located(path: Path, required: dict[str, str] | None = None,
                  optional: dict[str, str] | None = None) -> _Located:
     """Read one table file; string columns of the schema stay text ("00001", "NA"), numeric ones are numbers."""
@@ -150,14 +168,23 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
     try:
         if _suffix(path) == ".parquet":
             return pd.read_parquet(path)
-        if schema is None:
-            return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""])
-        strs = [c for c, k in schema.items() if k == "str"]
-        return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
-                           na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"})
+        with warnings.catch_warnings():
+            # a first data row longer than the header: pandas would make an index of it, or drop cells
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            if schema is None:
+                return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""],
+                                   index_col=False)
+            strs = [c for c, k in schema.items() if k == "str"]
+            return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
+                               na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+    except pd.errors.ParserWarning:
+        raise InputError(*_long_record(path)) from None
     except pd.errors.EmptyDataError:
         raise InputError("empty file (no header)", str(path)) from None
     except pd.errors.ParserError as e:
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(e))
+        if m:
+            raise InputError(f"{m.group(3)} fields, the header has {m.group(1)}", f"{path}:{m.group(2)}") from None
         raise InputError(f"malformed CSV ({one_line(str(e))})", str(path)) from None
     except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as e:
         kind = "gzip" if str(path).endswith(".gz") else "file"
