@@ -120,7 +120,7 @@ def test_corrupt_parquet_is_one_line(tmp_path: Path, capsys) -> None:
 
 
 def test_huge_values_are_cut_in_messages(tmp_path: Path, capsys) -> None:
-    folder = _corrupt_wifi(tmp_path, lambda d: d.replace(b"net0", b"x" * 100_000, 1).replace(b"2437.0", b"z" * 10**6, 1))
+    folder = _corrupt_wifi(tmp_path, lambda d: d.replace(b"2437.0", b"z" * 10**6, 1))
     line = _one_error(run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws"), r"wifi.csv:2: column freq_mhz")
     assert len(line) < 1000
 
