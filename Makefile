@@ -9,7 +9,7 @@ SEED ?= 7
 
 RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
 
-.PHONY: venv run test bench lint clean
+.PHONY: venv run test bench fuzz lint clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
@@ -35,7 +35,7 @@ run: $(STAMP)
 	@echo "results:"
 	@echo "  input files (simulated venue + truth/): $(RUN_DIR)/input"
 	@echo "  workspace:                              $(RUN_DIR)/workspace"
-	@echo "  stage reports:                          $(RUN_DIR)/workspace/reports/*.json"
+	@echo "  stage reports:                          $(RUN_DIR)/workspace/*/report.json"
 	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
 	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
@@ -48,6 +48,13 @@ test: $(STAMP)
 ## make bench: benchmarks; figures go to bench/results/*.json and bench/results/SUMMARY.md
 bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
+
+## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap; figures go to
+## bench/results/fuzz.json (FUZZ_CASES, FUZZ_JOBS to change the size and the worker count)
+FUZZ_CASES ?= 10000
+FUZZ_JOBS ?= 1
+fuzz: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench

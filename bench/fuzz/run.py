@@ -39,8 +39,9 @@ def _spawn(base: Path, work: Path) -> subprocess.Popen:
 
 
 def run_cases(cases: list[tuple[str, int]], jobs: int = 1, work: Path | None = None,
-              progress: bool = False) -> list[dict]:
-    """Run ``cases`` ((kind, seed) pairs) in ``jobs`` workers; one result dict per case, in order."""
+              progress: bool = False, light: bool = False) -> list[dict]:
+    """Run ``cases`` ((kind, seed) pairs) in ``jobs`` workers; one result dict per case, in order.
+    ``light``: config cases only load the file (see :func:`bench.fuzz.cases.make_case`)."""
     with tempfile.TemporaryDirectory(prefix="rmbuild-fuzz-", dir=work) as tmp:
         base = make_bases(Path(tmp) / "base")
         results: dict[tuple[str, int], dict] = {}
@@ -55,7 +56,8 @@ def run_cases(cases: list[tuple[str, int]], jobs: int = 1, work: Path | None = N
             for w in workers:
                 if w.case is None and todo:
                     w.case, w.started = todo.pop(0), time.perf_counter()
-                    w.proc.stdin.write(json.dumps({"kind": w.case[0], "seed": w.case[1]}) + "\n")  # type: ignore
+                    req = {"kind": w.case[0], "seed": w.case[1], "light": light}
+                    w.proc.stdin.write(json.dumps(req) + "\n")  # type: ignore[union-attr]
             for key, _ in sel.select(timeout=1.0):
                 w = key.data
                 line = w.proc.stdout.readline()

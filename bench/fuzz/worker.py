@@ -1,6 +1,6 @@
 """The fuzz worker: runs cases in-process under a memory cap and reports one JSON line per case.
 
-Protocol: the parent writes ``{"kind", "seed"}`` lines on stdin; the worker answers each with a result
+Protocol: the parent writes ``{"kind", "seed", "light"}`` lines on stdin; the worker answers each with a result
 line on its original stdout (the CLI's own output is captured). Start:
 ``python -m bench.fuzz.worker BASE_DIR WORK_DIR MEM_CAP_MB TIMEOUT_S``.
 """
@@ -58,13 +58,13 @@ def _leftovers(root: Path) -> list[str]:
                   if any(m in p.name for m in (".new-", ".old-", ".lock", ".part")))
 
 
-def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float) -> dict:
+def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float, light: bool = False) -> dict:
     from bench.fuzz.cases import make_case
     from rmbuild.cli import main
 
     root = work / f"{kind}-{seed}"
     shutil.rmtree(root, ignore_errors=True)
-    case = make_case(kind, seed, base, root)
+    case = make_case(kind, seed, base, root, light)
     before = _digest(case.unchanged) if case.unchanged is not None else None
     out, err = io.StringIO(), io.StringIO()
     _reset_peak()
@@ -130,15 +130,15 @@ def main() -> None:
     import rmbuild.cli.ingest  # noqa: F401
     import rmbuild.stages.optimize  # noqa: F401
 
-    vm = _status_kb("VmSize") * 1024
-    cap = int(vm + cap_mb * 2**20)
-    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
     signal.signal(signal.SIGALRM, _alarm)
     proto = os.fdopen(os.dup(sys.stdout.fileno()), "w", buffering=1)
     for line in sys.stdin:
         req = json.loads(line)
+        # the cap counts from the worker's size now: what earlier cases left mapped is not this case's
+        cap = int(_status_kb("VmSize") * 1024 + cap_mb * 2**20)
+        resource.setrlimit(resource.RLIMIT_AS, (cap, resource.RLIM_INFINITY))
         try:
-            res = run_one(req["kind"], int(req["seed"]), base, work, timeout_s)
+            res = run_one(req["kind"], int(req["seed"]), base, work, timeout_s, bool(req.get("light")))
         except MemoryError:
             res = {"kind": req["kind"], "seed": req["seed"], "code": "memory", "problems": ["memory cap"],
                    "stderr": "", "time_s": None, "peak_rss_mb": None}

@@ -200,6 +200,15 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
         raise InputError(f"unreadable Parquet ({type(e).__name__}: {e})", str(path)) from None
 
 
+def _as_stored(df: pd.DataFrame) -> pd.DataFrame:
+    """A table kept as given (truth tables): columns of mixed or oversized values (e.g. an integer beyond
+    64 bits) become text, so that the workspace can store them."""
+    for c in df.columns:
+        if df[c].dtype == object:
+            df[c] = df[c].map(lambda v: v if isinstance(v, str) or v is None else str(v))
+    return df
+
+
 def check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
     cols = [str(c) for c in loc.df.columns]
     known = list(required) + list(optional)
@@ -388,7 +397,7 @@ class RmbuildSchemaReader(Reader):
                     raise InputError(f"invalid JSON ({e})", str(fs[0])) from None
             elif t.startswith("truth/") and t != "truth/poses":
                 name = t.removeprefix("truth/")
-                df = pd.concat([_read_file(f) for f in fs], ignore_index=True)
+                df = pd.concat([_as_stored(_read_file(f)) for f in fs], ignore_index=True)
                 if name == "aps":
                     raw.truth_aps = df
                 else:
