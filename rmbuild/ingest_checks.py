@@ -15,8 +15,6 @@ Pure: takes a :class:`Dataset`, returns the warnings.
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 import pandas as pd
 
@@ -50,35 +48,39 @@ def evidence_warnings(ds: Dataset) -> list[str]:
     ]
 
 
-def _walk_digest(poses: pd.DataFrame, cols: list[str], t0: float) -> str:
-    rel = poses[cols].to_numpy(dtype=np.float64).copy()
-    rel[:, 0] -= t0
-    return hashlib.sha1(np.round(rel, 4).tobytes()).hexdigest()
+def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series) -> pd.Series:
+    """Per walk, an order-independent digest of its rows (times relative to the walk's first pose,
+    values rounded): equal digests mean equal rows."""
+    rel = df[cols].copy()  # the walk id itself is not hashed: a copy has another one
+    rel["t_s"] = np.round(rel["t_s"].to_numpy(float) - t0.reindex(df["walk_id"]).to_numpy(float), 3)
+    for c in cols:
+        if c != "t_s" and pd.api.types.is_float_dtype(rel[c]):
+            rel[c] = np.round(rel[c].to_numpy(float), 3)
+    h = pd.util.hash_pandas_object(rel, index=False).to_numpy()
+    g = pd.Series(h, index=df["walk_id"].to_numpy()).groupby(level=0, sort=False)
+    # sum and xor of 64-bit row hashes, and the row count: a multiset digest
+    return g.sum().astype(str) + ":" + g.agg(lambda x: np.bitwise_xor.reduce(x.to_numpy())).astype(str) + ":" + \
+        g.size().astype(str)
 
 
 def duplicate_walks(ds: Dataset) -> list[str]:
     """Walks whose steps (relative times and own-frame poses) or scans (relative times, BSSIDs, RSSI)
     repeat another walk's."""
-    seen: dict[str, str] = {}
-    out: list[str] = []
     t0 = ds.poses.groupby("walk_id", sort=False)["t_s"].first()
-    wifi = ds.wifi.sort_values(["walk_id", "t_s", "bssid"], kind="stable")
-    scans = dict(iter(wifi.groupby("walk_id", sort=False)))
-    for wid, g in ds.poses.groupby("walk_id", sort=False):
-        keys = [("steps", _walk_digest(g, ["t_s", "x_m", "y_m", "heading_rad"], float(t0[wid])))]
-        w = scans.get(wid)
-        if w is not None and len(w):
-            rel = np.round(w["t_s"].to_numpy(float) - float(t0[wid]), 3)
-            text = "|".join(f"{t}/{b}/{r:.1f}" for t, b, r in zip(rel, w["bssid"], w["rssi_dbm"]))
-            keys.append(("scans", hashlib.sha1(text.encode()).hexdigest()))
-        if len(g) < 2:
-            keys = keys[1:]  # one pose is no evidence of a copy
-        for what, k in keys:
-            other = seen.setdefault(k, str(wid))
-            if other != str(wid):
+    n = ds.poses.groupby("walk_id", sort=False).size()
+    digests = {"steps": _walk_digests(ds.poses[n.reindex(ds.poses["walk_id"]).to_numpy() >= 2],
+                                      ["t_s", "x_m", "y_m", "heading_rad"], t0),
+               "scans": _walk_digests(ds.wifi, ["t_s", "bssid", "rssi_dbm"], t0)}
+    out: list[str] = []
+    reported: set[str] = set()
+    for what, d in digests.items():
+        first: dict[str, str] = {}
+        for wid, key in d.items():
+            other = first.setdefault(key, str(wid))
+            if other != str(wid) and str(wid) not in reported:
+                reported.add(str(wid))
                 out.append(f"walk {str(wid)!r} repeats the {what} of walk {other!r} (a copy under another id?); "
                            "it counts twice as evidence: remove one of them")
-                break
     return out
 
 
@@ -98,25 +100,24 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     if wifi["walk_id"].nunique() < 3:
         return {}
     scan = wifi.groupby(["walk_id", "t_s"], sort=False).ngroup().to_numpy()
-    n_aps = np.bincount(scan)
-    keep = n_aps[scan] >= MIN_SHARED_APS
+    keep = np.bincount(scan)[scan] >= MIN_SHARED_APS
     wifi, scan = wifi[keep], scan[keep]
     if not len(wifi):
         return {}
     rssi = wifi["rssi_dbm"].to_numpy(np.float64)
     ap = pd.factorize(wifi["bssid"])[0]
     walk_codes, walk_names = pd.factorize(wifi["walk_id"])
-    # the strongest AP of every scan names its group
+    # the strongest AP of every scan names its group; scan_walk[s]: the walk of scan s
     order = np.lexsort((-rssi, scan))
     first = order[np.r_[True, scan[order][1:] != scan[order][:-1]]]
-    top = pd.Series(ap[first], index=scan[first])
-    scan_walk = pd.Series(walk_codes[first], index=scan[first])
+    scan_walk = np.full(int(scan.max()) + 1, -1)
+    scan_walk[scan[first]] = walk_codes[first]
+    top = pd.Series(scan[first]).groupby(ap[first]).agg(list)
     rng = np.random.default_rng(seed)
     diffs: list[list[float]] = [[] for _ in walk_names]
-    groups = top.groupby(top.to_numpy()).groups
-    for _, members in sorted(groups.items(), key=lambda kv: -len(kv[1]))[:MAX_GROUPS]:
+    for members in sorted(top, key=len, reverse=True)[:MAX_GROUPS]:
         m = np.asarray(members)
-        if scan_walk[m].nunique() < 2:
+        if len(np.unique(scan_walk[m])) < 2:
             continue
         if len(m) > MAX_GROUP_SCANS:
             m = rng.choice(m, MAX_GROUP_SCANS, replace=False)
@@ -124,7 +125,16 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     return {str(walk_names[w]): float(np.median(d)) for w, d in enumerate(diffs) if len(d) >= MIN_PAIRS}
 
 
-def _group_pairs(members: np.ndarray, scan: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: pd.Series,
+def _row_nanmedian(a: np.ndarray) -> np.ndarray:
+    """Median of each row ignoring NaN (rows have at least one finite value)."""
+    n = np.isfinite(a).sum(axis=1)
+    srt = np.sort(a, axis=1)  # NaN last
+    lo = np.take_along_axis(srt, ((n - 1) // 2)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(srt, (n // 2)[:, None], axis=1)[:, 0]
+    return 0.5 * (lo + hi)
+
+
+def _group_pairs(members: np.ndarray, scan: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray,
                  diffs: list[list[float]]) -> None:
     """Median differences of the co-located scan pairs of one group, added to both walks' lists."""
     sel = np.isin(scan, members)
@@ -132,17 +142,18 @@ def _group_pairs(members: np.ndarray, scan: np.ndarray, ap: np.ndarray, rssi: np
     cols, col_ap = pd.factorize(ap[sel])
     mat = np.full((len(members), len(col_ap)), np.nan)
     mat[row, cols] = rssi[sel]
-    d = mat[:, None, :] - mat[None, :, :]  # scans x scans x APs
-    shared = np.isfinite(d).sum(axis=2)
-    walks = scan_walk[members].to_numpy()
+    walks = scan_walk[members]
     iu, ju = np.triu_indices(len(members), 1)
-    ok = (walks[iu] != walks[ju]) & (shared[iu, ju] >= MIN_SHARED_APS)
+    seen = np.isfinite(mat).astype(np.int32)
+    shared = (seen @ seen.T)[iu, ju]
+    ok = (walks[iu] != walks[ju]) & (shared >= MIN_SHARED_APS)
     if not ok.any():
         return
     iu, ju = iu[ok], ju[ok]
-    dd = d[iu, ju]
-    med = np.nanmedian(dd, axis=1)
-    mad = np.nanmedian(np.abs(dd - med[:, None]), axis=1)
-    for i, j, v in zip(iu[mad <= COLOCATED_MAD_DB], ju[mad <= COLOCATED_MAD_DB], med[mad <= COLOCATED_MAD_DB]):
-        diffs[walks[i]].append(float(v))
-        diffs[walks[j]].append(-float(v))
+    dd = mat[iu] - mat[ju]
+    med = _row_nanmedian(dd)
+    mad = _row_nanmedian(np.abs(dd - med[:, None]))
+    co = mad <= COLOCATED_MAD_DB
+    for i, j, v in zip(walks[iu[co]], walks[ju[co]], med[co]):
+        diffs[i].append(float(v))
+        diffs[j].append(-float(v))

@@ -12,6 +12,7 @@ Locks are re-entrant within a process (a stage calling another stage's code on t
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -56,13 +57,23 @@ def workspace_lock(root: str | Path, command: str, exclusive: bool = True) -> It
             fd, ex, depth = _HELD[key]
             _HELD[key] = (fd, ex, depth - 1)
         return
-    fd = _acquire(key, command, exclusive)
+    try:
+        fd = _acquire(key, command, exclusive)
+    except _NoLockFile:
+        # a reader of a workspace it cannot write beside (read-only media, another user's): no writer
+        # can be at work there either, so it reads without a lock
+        yield
+        return
     _HELD[key] = (fd, exclusive, 1)
     try:
         yield
     finally:
         del _HELD[key]
         _release(key, fd, exclusive)
+
+
+class _NoLockFile(Exception):
+    """A shared lock's file cannot be created (no write access beside the workspace)."""
 
 
 def _acquire(root: Path, command: str, exclusive: bool) -> int:
@@ -73,6 +84,8 @@ def _acquire(root: Path, command: str, exclusive: bool) -> int:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as e:
+            if not exclusive and e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+                raise _NoLockFile() from None
             raise WorkspaceError(f"{path}: cannot create the workspace lock ({e.strerror})") from None
         try:
             fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)
