@@ -91,3 +91,33 @@ def test_ingest_core_errors_name_their_file(tmp_path: Path, capsys) -> None:
     folder = write_tables(t, tmp_path / "in")
     r = run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws")
     assert r.code == 2 and str(folder) in r.err, r.err
+
+
+@pytest.mark.xfail(strict=True, reason=KNOWN[r"MemoryError|OverflowError"])
+def test_an_overlong_ilc_line_is_a_clean_error(tmp_path: Path) -> None:
+    """A 2 MB accelerometer line (one 2 MB value) in an ILC trace; run in a child process capped at 2 GB of
+    address space and 60 s."""
+    import os
+    import resource
+    import subprocess
+    import sys
+
+    lines = FIXTURE.read_text().split("\n")
+    i = next(k for k, ln in enumerate(lines) if "\tTYPE_ACCELEROMETER\t" in ln and k > 700)
+    cells = lines[i].split("\t")
+    cells[3] = "7" * (2 << 20)
+    lines[i] = "\t".join(cells)
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "trace.txt").write_text("\n".join(lines))
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, resource.RLIM_INFINITY))
+
+    repo = Path(__file__).resolve().parents[1]
+    try:
+        p = subprocess.run([sys.executable, "-m", "rmbuild", "ingest", str(tmp_path / "in"), "-w",
+                            str(tmp_path / "ws")], preexec_fn=cap, capture_output=True, text=True, timeout=60,
+                           cwd=repo, env={**os.environ, "PYTHONPATH": str(repo)})
+    except subprocess.TimeoutExpired:
+        pytest.fail("ingest of a trace with a 2 MB line took more than 60 s")
+    assert p.returncode == 2 and f"trace.txt:{i + 1}" in p.stderr, p.stderr

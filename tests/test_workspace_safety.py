@@ -214,3 +214,19 @@ def test_report_and_recordings_are_not_overwritten_without_force(optimized: Path
     assert r.code == 2 and rrd.read_bytes() == b"precious" and not (root / "map").exists()
     assert run_cli(capsys, "view", "-w", root, "--save", rrd, "--force", "-q").code == 0
     assert rrd.read_bytes() != b"precious"
+
+
+def test_workspace_file_names_live_in_one_module() -> None:
+    """Paths into a workspace are built only by rmbuild/io/workspace.py (simulate writes input files)."""
+    import re
+
+    from rmbuild.io.workspace import ARTEFACTS, STAGE_DIRS
+
+    names = {Path(rel).name for rel in ARTEFACTS.values()} | set(STAGE_DIRS.values()) | {
+        "stage.json", "manifest.json", "reports", "config.toml", "report.json"}
+    pattern = re.compile(r'/\s*f?"(' + "|".join(map(re.escape, sorted(names))) + r')"')
+    pkg = REPO / "rmbuild"
+    skip = {pkg / "io" / "workspace.py", pkg / "stages" / "simulate.py"}
+    offenders = [f"{p.relative_to(REPO)}:{i}: {line.strip()}" for p in sorted(pkg.rglob("*.py")) if p not in skip
+                 for i, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
+    assert offenders == [], offenders
