@@ -15,6 +15,7 @@ import contextlib
 import errno
 import fcntl
 import json
+import logging
 import os
 import socket
 from collections.abc import Iterator
@@ -22,6 +23,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from rmbuild.errors import WorkspaceBusyError, WorkspaceError
+
+log = logging.getLogger(__name__)
 
 #: resolved workspace root -> (file descriptor, exclusive, depth) of the locks this process holds
 _HELD: dict[Path, tuple[int, bool, int]] = {}
@@ -102,6 +105,11 @@ def _acquire(root: Path, command: str, exclusive: bool) -> int:
             break
         os.close(fd)
     if exclusive:
+        old = _info(fd)
+        if isinstance(old.get("pid"), int) and old["pid"] != os.getpid():
+            # left by a writer that died without releasing it (kill -9, power loss): the kernel freed it
+            log.info("workspace %s: took over the stale lock of `rmbuild %s` (pid %s on %s, since %s)", root,
+                     old.get("command"), old.get("pid"), old.get("host"), old.get("since_utc"))
         info = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
                 "since_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")}
         os.ftruncate(fd, 0)
@@ -118,12 +126,18 @@ def _release(root: Path, fd: int, exclusive: bool) -> None:
         os.close(fd)
 
 
-def _holder(fd: int) -> str:
-    """Who holds the lock, for the busy message."""
+def _info(fd: int) -> dict:
+    """What the last writer recorded in the lock file ({} when nothing readable)."""
     try:
         info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
     except (OSError, ValueError):
-        info = {}
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def _holder(fd: int) -> str:
+    """Who holds the lock, for the busy message."""
+    info = _info(fd)
     pid, host = info.get("pid"), info.get("host")
     if not isinstance(pid, int) or (host == socket.gethostname() and not _alive(pid)):
         # no writer recorded (or the recorded one is gone): the holders are readers (view, report)
