@@ -143,7 +143,9 @@ def _to_parquet(inp: Path, rng: np.random.Generator, case: Case) -> None:
     """Turn each CSV that still parses into Parquet; corrupt one Parquet file now and then."""
     for f in sorted(inp.glob("*.csv")):
         try:
-            df = pd.read_csv(f, dtype={"walk_id": str, "bssid": str})
+            df = pd.read_csv(f, dtype={"walk_id": str, "bssid": str}, index_col=False)
+            if df.shape[1] > 50:
+                continue  # a mutated header: keep the (broken) CSV
         except Exception:
             continue  # the mutation broke it: it stays a (broken) CSV
         p = f.with_suffix(".parquet")
@@ -185,7 +187,7 @@ def _config(kind: str, seed: int, base: Path, root: Path, rng: np.random.Generat
     for _ in range(_n_mutations(rng)):
         r = rng.random()
         if r < 0.6:
-            keys = [i for i, ln in enumerate(lines) if " = " in ln and not ln.startswith("#")]
+            keys = [i for i, ln in enumerate(lines) if " = " in ln and not ln.startswith("#")] or [0]
             i = keys[int(rng.integers(len(keys)))]
             value = TOML_VALUES[int(rng.integers(len(TOML_VALUES)))]
             lines[i] = lines[i].split(" = ")[0] + " = " + value
@@ -234,7 +236,10 @@ def _anchors(kind: str, seed: int, base: Path, root: Path, rng: np.random.Genera
         case.description.append(what)
     if rng.random() < 0.15:
         try:
-            pd.read_csv(pd.io.common.BytesIO(data), dtype={"walk_id": str}).to_parquet(f.with_suffix(".parquet"))
+            df = pd.read_csv(pd.io.common.BytesIO(data), dtype={"walk_id": str}, index_col=False)
+            if df.shape[1] > 50:
+                raise ValueError("mutated header")
+            df.to_parquet(f.with_suffix(".parquet"))
             f = f.with_suffix(".parquet")
             case.description.append("as Parquet")
         except Exception:
@@ -251,7 +256,7 @@ def _anchors(kind: str, seed: int, base: Path, root: Path, rng: np.random.Genera
 def _anchor_nonsense(data: bytes, rng: np.random.Generator) -> tuple[bytes, str]:
     """Well-formed but absurd anchors: far away, contradictory, of unknown walks, outside the walk."""
     try:
-        df = pd.read_csv(pd.io.common.BytesIO(data), dtype=str, keep_default_na=False)
+        df = pd.read_csv(pd.io.common.BytesIO(data), dtype=str, keep_default_na=False, index_col=False)
     except Exception:
         return data, "(anchors already unreadable)"
     if not len(df) or not {"walk_id", "t_s", "x_m"} <= set(df.columns):

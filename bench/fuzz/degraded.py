@@ -31,6 +31,9 @@ def _scenario(src: Path, dst: Path, name: str) -> None:
     elif name in ("offset+10", "offset-10"):
         wifi.loc[wifi["walk_id"] == wid, "rssi_dbm"] += 10.0 if name == "offset+10" else -10.0
     elif name == "duplicate":
+        truth = pd.read_parquet(dst / "truth" / "poses.parquet")
+        pd.concat([truth, truth[truth["walk_id"] == wid].assign(walk_id=wid + "_copy")], ignore_index=True
+                  ).to_parquet(dst / "truth" / "poses.parquet", index=False)
         wifi = pd.concat([wifi, wifi[wifi["walk_id"] == wid].assign(walk_id=wid + "_copy")], ignore_index=True)
         poses = pd.concat([poses, poses[poses["walk_id"] == wid].assign(walk_id=wid + "_copy")], ignore_index=True)
         walks = pd.concat([walks, walks[walks["walk_id"] == wid].assign(walk_id=wid + "_copy")], ignore_index=True)
@@ -55,7 +58,8 @@ def run(scenarios: list[str]) -> dict:
             _scenario(src, d / "in", name)
             ing = rmbuild(["ingest", str(d / "in"), "-w", str(d / "ws")])
             row: dict = {"ingest_exit": ing.returncode,
-                         "ingest_warnings": [ln for ln in ing.stderr.splitlines() if ln.startswith("WARNING")]}
+                         "ingest_warnings": [ln for ln in ing.stderr.splitlines() if ln.startswith("WARNING")],
+                         "ingest_error": ing.stderr.strip().splitlines()[-1:] if ing.returncode else []}
             if ing.returncode == 0:
                 opt = rmbuild(["optimize", "-w", str(d / "ws"), "-q"])
                 row["optimize_exit"] = opt.returncode

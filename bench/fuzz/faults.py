@@ -109,9 +109,21 @@ def kill_at_commit_point(root: Path, stage: str, point: str) -> int:
     return p.returncode
 
 
-def run_and_signal(args: list[str], delay_s: float, sig: int) -> subprocess.CompletedProcess:
+def _default_sigint() -> None:
+    """In the child: Ctrl-C's default action (a shell's background job inherits SIGINT ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def run_and_signal(args: list[str], delay_s: float, sig: int, workspace: Path | None = None
+                   ) -> subprocess.CompletedProcess:
+    """Run rmbuild and send ``sig`` after ``delay_s``, counted from the moment the command holds the lock
+    of ``workspace`` when given (its stage is running), else from the start."""
     proc = subprocess.Popen([sys.executable, "-m", "rmbuild", *args], cwd=REPO, env=ENV, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    if workspace is not None:
+        t0 = time.perf_counter()
+        while not lock_path(workspace).exists() and proc.poll() is None and time.perf_counter() - t0 < 120:
+            time.sleep(0.01)
     time.sleep(delay_s)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=300)
@@ -125,9 +137,12 @@ def random_kills(root: Path, stage: str, n: int, rng: np.random.Generator, sig: 
     assert rmbuild(argv(stage, root)).returncode == 0
     full = time.perf_counter() - t0
     out: Counter = Counter()
-    for delay in rng.uniform(0.2, full * 1.05, n):
+    # SIGKILL: any time from the start; SIGINT: once the stage runs (Ctrl-C while Python still imports
+    # rmbuild is Python's own KeyboardInterrupt, before rmbuild has done anything)
+    lo, on_lock = (0.2, None) if sig == signal.SIGKILL else (0.0, root)
+    for delay in rng.uniform(lo, full * (1.05 if sig == signal.SIGKILL else 0.5), n):
         before = records(root)
-        r = run_and_signal(argv(stage, root), float(delay), sig)
+        r = run_and_signal(argv(stage, root), float(delay), sig, on_lock)
         ok_codes = (0, -signal.SIGKILL) if sig == signal.SIGKILL else (0, 130)
         out[f"exit {r.returncode}"] += 1
         if r.returncode not in ok_codes:

@@ -21,6 +21,9 @@ REPO = Path(__file__).resolve().parents[2]
 MEM_CAP_MB = 1536
 #: s; a case taking longer fails
 TIMEOUT_S = 60.0
+#: cases a worker runs before it is replaced (a long-lived process keeps memory it has freed; the peak
+#: of a case is measured from a worker of about its start-up size)
+CASES_PER_WORKER = 100
 
 
 @dataclass
@@ -28,6 +31,7 @@ class _Worker:
     proc: subprocess.Popen
     case: tuple[str, int] | None = None
     started: float = 0.0
+    done: int = 0
 
 
 def _spawn(base: Path, work: Path) -> subprocess.Popen:
@@ -65,6 +69,10 @@ def run_cases(cases: list[tuple[str, int]], jobs: int = 1, work: Path | None = N
                     r = json.loads(line)
                     results[(r["kind"], r["seed"])] = r
                     w.case = None
+                    w.done += 1
+                    if w.done >= CASES_PER_WORKER and todo:
+                        w.proc.stdin.close()  # type: ignore[union-attr]
+                        _replace(w, sel, base, Path(tmp), results, "")
                 else:  # the worker died (killed by the kernel, a crash in native code)
                     _replace(w, sel, base, Path(tmp), results, "worker died")
             for w in workers:
@@ -85,6 +93,7 @@ def run_cases(cases: list[tuple[str, int]], jobs: int = 1, work: Path | None = N
 def _replace(w: _Worker, sel: selectors.BaseSelector, base: Path, work: Path, results: dict, why: str) -> None:
     sel.unregister(w.proc.stdout)  # type: ignore[arg-type]
     w.proc.wait()
+    w.done = 0
     if w.case is not None:
         results[w.case] = {"kind": w.case[0], "seed": w.case[1], "code": why, "problems": [why],
                            "stderr": "", "time_s": None, "peak_rss_mb": None}

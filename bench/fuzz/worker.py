@@ -67,6 +67,7 @@ def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float, ligh
     case = make_case(kind, seed, base, root, light)
     before = _digest(case.unchanged) if case.unchanged is not None else None
     out, err = io.StringIO(), io.StringIO()
+    rss_before = _status_kb("VmRSS") / 1024
     _reset_peak()
     t0 = time.perf_counter()
     code: int | str
@@ -86,7 +87,7 @@ def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float, ligh
     elapsed = time.perf_counter() - t0
     result = {"kind": kind, "seed": seed, "argv": case.argv, "mutations": case.description, "code": code,
               "stderr": err.getvalue(), "time_s": round(elapsed, 3),
-              "peak_rss_mb": round(_status_kb("VmHWM") / 1024, 1)}
+              "peak_rss_mb": round(_status_kb("VmHWM") / 1024, 1), "rss_before_mb": round(rss_before, 1)}
     result["problems"] = problems(case, result, before)
     result["stderr"] = result["stderr"][-3000:]
     shutil.rmtree(root, ignore_errors=True)

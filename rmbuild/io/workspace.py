@@ -200,7 +200,11 @@ class StageWriter:
         self.path(key).write_text(text)
 
     def figure(self, key: str, fig: Any, dpi: int = 110) -> None:
+        """Save a matplotlib figure and close it (pyplot keeps open figures alive)."""
+        import matplotlib.pyplot as plt
+
         fig.savefig(self.path(key), dpi=dpi, bbox_inches="tight")
+        plt.close(fig)
 
     def config(self, toml_text: str) -> None:
         """The resolved config of this run, written next to the outputs."""

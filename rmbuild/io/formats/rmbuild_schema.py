@@ -12,6 +12,7 @@ import difflib
 import gzip
 import io
 import json
+import math
 import os
 import re
 import warnings
@@ -77,6 +78,8 @@ def _table_of(p: Path) -> str | None:
     return None
 
 
+#: columns; no table of the schema (nor a truth table) has more than a dozen
+MAX_COLUMNS = 1000
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
 NUMERIC_NA = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "null", "NULL", "None", "<NA>"]
 
@@ -143,6 +146,26 @@ def _bad_utf8_line(path: Path) -> str:
     return ""
 
 
+def _check_width(path: Path) -> None:
+    """The header has at most :data:`MAX_COLUMNS` columns and the first data row no more fields than the
+    header (pandas would parse every field of a longer first row into a column before complaining)."""
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        header = next((row for row in reader if row), None)
+        if header is None:
+            return
+        if len(header) > MAX_COLUMNS:
+            raise InputError(f"{len(header):,} columns: at most {MAX_COLUMNS}", f"{path}:{reader.line_num}")
+        line = reader.line_num + 1
+        for row in reader:
+            if row:
+                if len(row) > len(header):
+                    raise InputError(f"{len(row)} fields, the header has {len(header)}", f"{path}:{line}")
+                return
+            line = reader.line_num + 1
+
+
 def _long_record(path: Path) -> tuple[str, str]:
     """(problem, where) of the first record with more fields than the header."""
     csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
@@ -168,6 +191,7 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
     try:
         if _suffix(path) == ".parquet":
             return pd.read_parquet(path)
+        _check_width(path)
         with warnings.catch_warnings():
             # a first data row longer than the header: pandas would make an index of it, or drop cells
             warnings.simplefilter("error", pd.errors.ParserWarning)
@@ -177,6 +201,8 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
             strs = [c for c, k in schema.items() if k == "str"]
             return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
                                na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+    except InputError:
+        raise
     except pd.errors.ParserWarning:
         raise InputError(*_long_record(path)) from None
     except pd.errors.EmptyDataError:
@@ -226,6 +252,38 @@ def check_columns(loc: _Located, required: dict[str, str], optional: dict[str, s
         raise InputError("no data rows", str(loc.path))
 
 
+def _numbers(s: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+    """A column as float64 and a mask of the cells that are not numbers; integers beyond the float range
+    (a 400-digit cell) become +-inf, missing values NaN."""
+    if pd.api.types.is_numeric_dtype(s) and not pd.api.types.is_bool_dtype(s):
+        try:
+            return s.to_numpy(dtype=np.float64), np.zeros(len(s), bool)
+        except OverflowError:
+            pass
+    else:
+        try:
+            num = pd.to_numeric(s, errors="coerce")
+            return num.to_numpy(dtype=np.float64), (num.isna() & s.notna()).to_numpy()
+        except (OverflowError, ValueError, TypeError):
+            pass
+    pairs = [_one_number(v) for v in s]
+    return np.array([p[0] for p in pairs], dtype=np.float64), np.array([p[1] for p in pairs], dtype=bool)
+
+
+def _one_number(v: object) -> tuple[float, bool]:
+    """(value, not a number) of one cell."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return math.nan, False
+    if isinstance(v, bool):
+        return math.nan, True
+    try:
+        return float(v), False  # type: ignore[arg-type]
+    except OverflowError:  # an int beyond the float range
+        return (math.inf if v > 0 else -math.inf), False  # type: ignore[operator]
+    except (ValueError, TypeError):
+        return math.nan, True
+
+
 def coerce(loc: _Located, columns: dict[str, str]) -> None:
     """Check types and finiteness column by column; convert in place."""
     df = loc.df
@@ -241,14 +299,10 @@ def coerce(loc: _Located, columns: dict[str, str]) -> None:
                 raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
             df[c] = text
             continue
-        if not pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
-            num = pd.to_numeric(s, errors="coerce")
-            bad = (num.isna() & s.notna()).to_numpy()
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise InputError(f"column {c}: not a number: {str(s.iloc[i])[:60]!r}", loc.where(i))
-            s = num
-        v = s.to_numpy(dtype=np.float64)
+        v, bad = _numbers(s)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"column {c}: not a number: {str(s.iloc[i])[:60]!r}", loc.where(i))
         nan = np.isnan(v)
         if nan.any() and c not in NULLABLE:
             raise InputError(f"column {c}: empty or NaN value", loc.where(int(np.argmax(nan))))
