@@ -49,12 +49,16 @@ test: $(STAMP)
 bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
 
-## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap; figures go to
-## bench/results/fuzz.json (FUZZ_CASES, FUZZ_JOBS to change the size and the worker count)
+## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap, kill -9 / SIGINT
+## fault injection into every stage, degraded evidence; figures go to bench/results/{fuzz,faults,degraded}.json
+## (FUZZ_CASES, FUZZ_JOBS, FAULT_KILLS change the size and the worker count)
 FUZZ_CASES ?= 10000
-FUZZ_JOBS ?= 1
+FUZZ_JOBS ?= 2
+FAULT_KILLS ?= 25
 fuzz: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json
+	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --out bench/results/faults.json
+	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz.degraded --out bench/results/degraded.json
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench
