@@ -56,9 +56,11 @@ FUZZ_CASES ?= 10000
 FUZZ_JOBS ?= 2
 FAULT_KILLS ?= 25
 fuzz: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json
-	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --out bench/results/faults.json
-	MPLBACKEND=Agg $(BIN)/python -m bench.fuzz.degraded --out bench/results/degraded.json
+	export MPLBACKEND=Agg; \
+	$(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json; a=$$?; \
+	$(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --out bench/results/faults.json; b=$$?; \
+	$(BIN)/python -m bench.fuzz.degraded --out bench/results/degraded.json; c=$$?; \
+	exit $$(( a | b | c ))
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench
