@@ -109,9 +109,10 @@ def mutate_text(data: bytes, sep: str, rng: np.random.Generator, time_field: int
     if op == "nul":
         n = int(rng.integers(len(data) + 1))
         return data[:n] + b"\x00" * 8 + data[n:], f"NUL bytes at byte {n}"
-    if op == "repeat":
-        lines.lines[i:i + 1] = [lines.lines[i]] * 20_000
-        return _done(lines, f"line {i + 1} repeated 20,000 times")
+    if op == "repeat":  # up to 20,000 times, at most ~20 MB
+        n = max(2, min(20_000, (20 << 20) // max(1, len(lines.lines[i]))))
+        lines.lines[i:i + 1] = [lines.lines[i]] * n
+        return _done(lines, f"line {i + 1} repeated {n:,} times")
     if op == "header" and header:
         cells = lines.lines[0].split(sep)
         k = int(rng.integers(len(cells)))
