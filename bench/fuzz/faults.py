@@ -143,7 +143,9 @@ def random_kills(root: Path, stage: str, n: int, rng: np.random.Generator, sig: 
     for delay in rng.uniform(lo, full * (1.05 if sig == signal.SIGKILL else 0.5), n):
         before = records(root)
         r = run_and_signal(argv(stage, root), float(delay), sig, on_lock)
-        ok_codes = (0, -signal.SIGKILL) if sig == signal.SIGKILL else (0, 130)
+        # a Ctrl-C while Python finalises (after rmbuild's exit) ends the process by SIGINT: the shell reports
+        # 130 for it as for rmbuild's own exit 130
+        ok_codes = (0, -signal.SIGKILL) if sig == signal.SIGKILL else (0, 130, -signal.SIGINT)
         out[f"exit {r.returncode}"] += 1
         if r.returncode not in ok_codes:
             out["unexpected exit"] += 1
@@ -154,6 +156,8 @@ def random_kills(root: Path, stage: str, n: int, rng: np.random.Generator, sig: 
             out[f"inconsistent: {str(e)[:80]}"] += 1
         if lock_path(root).exists() and sig != signal.SIGKILL:
             out["lock left"] += 1
+        if "Traceback" in r.stderr:
+            out["traceback"] += 1
     out["next run ok"] = int(rmbuild(argv(stage, root)).returncode == 0)
     return {"kills": n, "full_run_s": round(full, 2), **dict(out)}
 
@@ -183,7 +187,8 @@ def main() -> None:
                 nxt = rmbuild(argv(stage, root)).returncode
                 res["commit_points"][f"{stage}/{point}"] = {"exit": code, "state": state, "next_run_exit": nxt}
             print(stage, res["random_sigkill"][stage], res["sigint"][stage], file=sys.stderr, flush=True)
-    bad = sum(v.get("inconsistent", 0) + v.get("unexpected exit", 0) + (1 - v["next run ok"])
+    bad = sum(v.get("inconsistent", 0) + v.get("unexpected exit", 0) + v.get("traceback", 0) + v.get("lock left", 0)
+              + (1 - v["next run ok"])
               for part in ("random_sigkill", "sigint") for v in res[part].values())
     bad += sum(v["state"] not in ("old", "new") or v["next_run_exit"] != 0 for v in res["commit_points"].values())
     res["failures"] = bad
