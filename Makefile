@@ -11,7 +11,7 @@ REAL_DATA ?= datasets/msft-ilc20/site1/F1
 
 RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
 
-.PHONY: venv run run-real test bench bench-real lint clean
+.PHONY: venv run run-real test bench bench-real fuzz lint clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
@@ -37,7 +37,7 @@ run: $(STAMP)
 	@echo "results:"
 	@echo "  input files (simulated venue + truth/): $(RUN_DIR)/input"
 	@echo "  workspace:                              $(RUN_DIR)/workspace"
-	@echo "  stage reports:                          $(RUN_DIR)/workspace/reports/*.json"
+	@echo "  stage reports:                          $(RUN_DIR)/workspace/*/report.json"
 	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
 	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
@@ -72,6 +72,19 @@ bench: $(STAMP)
 ## Options through BENCH_REAL_ARGS, e.g. BENCH_REAL_ARGS="--floors F1,F4 --out real_after"
 bench-real: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.bench_real $(BENCH_REAL_ARGS)
+
+## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap, kill -9 / SIGINT
+## fault injection into every stage, degraded evidence; figures go to bench/results/{fuzz,faults,degraded}.json
+## (FUZZ_CASES, FUZZ_JOBS, FAULT_KILLS change the size and the worker count)
+FUZZ_CASES ?= 10000
+FUZZ_JOBS ?= 2
+FAULT_KILLS ?= 25
+fuzz: $(STAMP)
+	export MPLBACKEND=Agg; \
+	$(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json; a=$$?; \
+	$(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --out bench/results/faults.json; b=$$?; \
+	$(BIN)/python -m bench.fuzz.degraded --out bench/results/degraded.json; c=$$?; \
+	exit $$(( a | b | c ))
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench

@@ -27,9 +27,29 @@ def test_help_lists_commands(capsys) -> None:
 @pytest.mark.parametrize("name", sorted(COMMANDS))
 def test_each_command_has_help(name: str, capsys) -> None:
     r = run_cli(capsys, name, "--help")
-    if "No such command" in r.err:
-        pytest.skip(f"{name} not built yet")
-    assert r.code == 0 and "Usage:" in r.out
+    assert r.code == 0 and "Usage:" in r.out, r.err
+
+
+def test_a_broken_command_module_is_an_error(capsys, monkeypatch) -> None:
+    """A command whose module fails to import is listed and fails loudly, never silently disappears."""
+    from rmbuild import cli as cli_mod
+
+    monkeypatch.setitem(cli_mod.COMMANDS, "view", "rmbuild.cli.no_such_module:view")
+    r = run_cli(capsys, "--help")
+    assert r.code == 0 and "view" in r.out
+    r = run_cli(capsys, "view", "--help")
+    assert r.code == 1 and r.err.strip().splitlines() == [r.err.strip()]
+    assert "command 'view' is broken" in r.err and "no_such_module" in r.err
+
+
+def test_format_choices_come_from_the_reader_registry(capsys) -> None:
+    from rmbuild.io.formats import REGISTRY, reader_names
+
+    r = run_cli(capsys, "ingest", "--help")
+    for name in reader_names():
+        assert name in r.out and REGISTRY[name].description.split()[0] in r.out
+    r = run_cli(capsys, "ingest", "x", "-w", "y", "--format", "nope")
+    assert r.code == 2 and "nope" in r.err
 
 
 def test_simulate_is_deterministic_and_safe(tmp_path: Path, capsys) -> None:

@@ -24,7 +24,7 @@ def test_defaults_round_trip_through_toml(section: str) -> None:
 def test_type_and_range_errors() -> None:
     with pytest.raises(ConfigError, match="expected a number"):
         from_dict(IngestConfig, {"max_attach_gap_s": "soon"})
-    with pytest.raises(ConfigError, match="max_attach_gap_s must be >= 0"):
+    with pytest.raises(ConfigError, match=r"max_attach_gap_s: -1.0 is outside its range \[0, 3600\]"):
         from_dict(IngestConfig, {"max_attach_gap_s": -1})
     with pytest.raises(ConfigError, match="unknown key 'gap'"):
         from_dict(IngestConfig, {"gap": 1})
@@ -71,3 +71,88 @@ def test_config_command_prints_a_file_that_loads_back(tmp_path: Path, capsys) ->
         assert load_stage_config(name, tmp_path / "all.toml") == SECTIONS[name]()
     r = run_cli(capsys, "config", "--stage", "nope")
     assert r.code == 2 and "unknown section 'nope'" in r.err
+
+
+# ------------------------------------------------------------------------------- ranges and file errors
+OWNED_ELSEWHERE = {"optimize", "pdr"}  # their modules are being rewritten; they get ranges there
+#: evaluate's localizer sub-tables live in config/localize.py (rewritten elsewhere, ranges come there)
+LOCALIZER_TABLES = ("slac.", "nb.", "ssd.", "pfl.", "smoothing.")
+
+
+@pytest.mark.parametrize("section", sorted(set(SECTIONS) - OWNED_ELSEWHERE))
+def test_every_numeric_field_has_a_documented_range(section: str) -> None:
+    from rmbuild.config.base import unbounded_fields
+
+    missing = [f for f in unbounded_fields(SECTIONS[section]) if not f.startswith(LOCALIZER_TABLES)]
+    assert missing == [], missing
+    text = to_toml(SECTIONS[section](), section, comments=True)
+    assert "# range: [" in text
+
+
+@pytest.mark.parametrize("text, line, message", [
+    ("[map]\ncell_size_m = 1e-300\n", 2, r"map.cell_size_m: 1e-300 is outside its range \[0.25, 100\]"),
+    ("[map]\n\n[map.fill]\n# note\nidw_power = 0.0\n", 5, r"map.fill.idw_power: 0.0 is outside its range"),
+    ("[ingest]\nrssi_max_dbm = 1e308\n", 2, r"ingest.rssi_max_dbm: 1e\+308 is outside its range"),
+    ("[evaluate.knn]\nk = -4611686018427387904\n", 2, r"evaluate.knn.k: -4611686018427387904 is outside"),
+    ("[map]\nfill = { idw_power = -1 }\n", 2, r"map.fill.idw_power: -1.0 is outside"),
+    ("[map]\ncell_size_m = 1" + "0" * 400 + "\n", 2, r"map.cell_size_m: expected a finite number, got 1000"),
+    ("[ingest]\nattach = \"nearby\"\n", 2, r"ingest.attach: must be one of \['interval', 'nearest'\]"),
+    ("[ingest]\ngap = 1\n", 2, r"ingest: unknown key 'gap'"),
+    ("[ingset]\n", 1, r"unknown section \[ingset\]"),
+    ("[ingest\n", 1, r"invalid TOML: Expected '\]'"),
+])
+def test_config_errors_name_file_line_and_key(text: str, line: int, message: str, tmp_path: Path, capsys) -> None:
+    from cli_util import run_cli
+
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    section = text.strip("[").split("]")[0].split(".")[0]
+    section = section if section in SECTIONS else "ingest"
+    with pytest.raises(ConfigError) as e:
+        load_stage_config(section, p)
+    assert str(e.value).startswith(f"{p}:{line}: "), str(e.value)
+    import re
+
+    assert re.search(message, str(e.value)), str(e.value)
+    r = run_cli(capsys, "config", "--config", p)
+    assert r.code == 2 and r.err.strip().splitlines() == [f"error: {e.value}"]
+
+
+def test_hostile_config_files_are_clean_errors(tmp_path: Path, capsys) -> None:
+    from cli_util import run_cli
+
+    cases = {
+        "latin1.toml": ("[ingest]\n# caf\xe9\n".encode("latin-1"), f"{tmp_path / 'latin1.toml'}:2: not UTF-8"),
+        "deep.toml": (b"[ingest]\nx = " + b"[" * 100_000 + b"]" * 100_000 + b"\n", "nested too deeply"),
+        "huge.toml": (b"#" * (2 << 20), "too large for a config file"),
+        "bin.toml": (bytes(range(256)), "not UTF-8"),
+    }
+    for name, (data, message) in cases.items():
+        (tmp_path / name).write_bytes(data)
+        r = run_cli(capsys, "config", "--config", tmp_path / name)
+        assert r.code == 2 and len(r.err.strip().splitlines()) == 1 and message in r.err, (name, r.err)
+    r = run_cli(capsys, "config", "--config", tmp_path)
+    assert r.code == 2
+
+
+def test_an_absurd_simulation_is_refused_before_it_starts(tmp_path: Path, capsys) -> None:
+    from cli_util import run_cli
+
+    p = tmp_path / "c.toml"
+    p.write_text("[simulate.walkers]\nn_long_walks = 1000\nlong_walk_steps = [100.0, 90000.0]\n")
+    r = run_cli(capsys, "simulate", tmp_path / "out", "--config", p)
+    assert r.code == 2 and "at most 1,000,000" in r.err and not (tmp_path / "out").exists()
+
+
+def test_a_range_applies_to_configs_built_in_python() -> None:
+    from rmbuild.config import MapConfig
+
+    with pytest.raises(ValueError, match="cell_size_m"):
+        MapConfig(cell_size_m=0.001).validate()
+
+
+def test_command_line_values_are_checked_like_the_file(tmp_path: Path, capsys) -> None:
+    from cli_util import run_cli
+
+    r = run_cli(capsys, "export-map", "-w", tmp_path / "nope", "--cell-size", "1e-300")
+    assert r.code == 2 and "command-line option: map.cell_size_m: 1e-300 is outside its range" in r.err

@@ -32,11 +32,11 @@ def test_ingest_csv_roundtrip(small_input: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(ds.wifi["t_s"].to_numpy() - t_node, 0.1, atol=1e-9)
     fp = w.read_fingerprints()
     assert len(fp) == 16 and fp.rss_dbm.shape[1] == 5
-    # manifest has checksums of every file of the stage, and the resolved config sits beside them
-    files = w.manifest["stages"]["ingest"]["files"]
-    assert "data/poses.parquet" in files and "data/config.toml" in files
+    # the stage's record has checksums of every file of the stage (its report and resolved config too)
+    files = w.record("ingest")["files"]
+    assert {"data/poses.parquet", "data/config.toml", "data/report.json"} <= set(files)
     assert 'attach = "interval"' in (ws / "data" / "config.toml").read_text()
-    assert (ws / "reports" / "ingest.json").is_file()
+    assert w.read_report("ingest")["walks"] == 2 and w.manifest["format"] == "rmbuild-workspace"
 
 
 def test_parquet_same_as_csv(tmp_path: Path) -> None:
@@ -125,8 +125,8 @@ def _corrupt(tmp_path: Path, table: str, edit) -> Path:
 
 
 BAD_CASES = {
-    "misspelt column": ("wifi", lambda d: d.rename(columns={"rssi_dbm": "rssi_dBm"}), r"wifi.csv: unknown column"),
-    "missing column": ("poses", lambda d: d.drop(columns=["heading_rad"]), r"poses.csv: missing required column"),
+    "misspelt column": ("wifi", lambda d: d.rename(columns={"rssi_dbm": "rssi_dBm"}), r"wifi.csv:1: unknown column"),
+    "missing column": ("poses", lambda d: d.drop(columns=["heading_rad"]), r"poses.csv:1: missing required column"),
     "wrong type": ("wifi", lambda d: d.assign(rssi_dbm=d["rssi_dbm"].astype(object).where(d.index != 5, "loud")),
                    r"wifi.csv:7: column rssi_dbm: not a number"),
     "nan": ("poses", lambda d: d.assign(x_m=d["x_m"].where(d.index != 3, np.nan)), r"poses.csv:5: column x_m"),

@@ -113,7 +113,7 @@ def test_evaluate_without_ground_truth(tmp_path: Path, capsys) -> None:
     r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws")
     assert r.code == 0, r.err
     assert "not computed" in r.out
-    rep = json.loads((tmp_path / "ws" / "reports" / "evaluate.json").read_text())
+    rep = json.loads((tmp_path / "ws" / "evaluate" / "report.json").read_text())
     assert rep["maps"] == {} and "errors" in rep["unavailable"]
 
 
@@ -137,7 +137,7 @@ def _optimize_copy(tiny_ws: Path, tmp_path: Path, capsys, grep: str):
     def run(*extra):
         r = run_cli(capsys, "optimize", "-w", ws, "--force", *extra)
         assert r.code == 0, r.err
-        rep = json.loads((ws / "reports" / "optimize.json").read_text())
+        rep = json.loads((ws / "optimize" / "report.json").read_text())
         walks = pd.read_parquet(ws / "optimize" / "walks.parquet")
         pairs = pd.read_parquet(ws / "optimize" / "pairs.parquet")
         return [ln for ln in r.out.splitlines() if grep in ln], rep, walks, pairs

@@ -177,7 +177,7 @@ def test_built_positions_leave_out_walks_neither_linked_nor_anchored():
     walks = pd.DataFrame({"walk_id": ["a", "b", "c"], "linked": [True, False, False],
                           "anchored": [False, True, False]})
     tables = {"optimize.poses": poses, "optimize.walks": walks}
-    ws = SimpleNamespace(require=lambda stage: None, read_table=tables.__getitem__,
+    ws = SimpleNamespace(require=lambda stage: None, read_table=tables.__getitem__, stale_inputs=lambda stage: [],
                          read_report=lambda stage: {"gauge": "anchors", "reference_walk": "a"}, path=str)
     ds = SimpleNamespace(n_nodes=6, poses=poses)
     xy, info = built_positions(ws, ds, MapConfig())

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
 import pytest
 from cli_util import run_cli
-from test_viz_util import DOC_IMG, WRITE_DOC_IMAGES, build_workspace, has_command
+from test_viz_util import DOC_IMG, WRITE_DOC_IMAGES, build_workspace
 
 from rmbuild.errors import RmbuildError
 from rmbuild.io.workspace import Workspace
@@ -95,6 +96,29 @@ def test_view_usage_errors(tmp_path: Path, capsys) -> None:
     assert r.code == 2
 
 
+def _public_methods(cls: type) -> set[str]:
+    return {n for n in dir(cls) if callable(getattr(cls, n)) and (not n.startswith("_") or n in ("__enter__",
+                                                                                               "__exit__"))}
+
+
+def test_viewer_contract_is_explicit() -> None:
+    """The protocol, the do-nothing viewer and the rerun viewer have the same methods (and signatures), so a
+    misspelt call fails whether viewing is on or off."""
+    import inspect
+
+    from rmbuild.viz import RerunViewer, Viewer
+
+    proto = {n for n in _public_methods(Viewer) if n not in dir(Protocol)} | {"__enter__", "__exit__"}
+    assert proto >= {"log_cost", "log_vicinity", "log_tracks", "set_walks", "close", "flush"}
+    assert _public_methods(NullViewer) == proto
+    assert {n for n in _public_methods(RerunViewer) if not n.startswith("_") or n.startswith("__e")} == proto
+    for n in proto - {"__enter__", "__exit__"}:
+        want = inspect.signature(getattr(Viewer, n))
+        assert inspect.signature(getattr(NullViewer, n)) == want, n
+        assert inspect.signature(getattr(RerunViewer, n)) == want, n
+    assert isinstance(NullViewer(), Viewer)
+
+
 def test_null_viewer_accepts_everything() -> None:
     v = ensure_viewer(None)
     assert isinstance(v, NullViewer) and not v.enabled
@@ -144,7 +168,6 @@ def test_bridge_radiomap_tracks_and_live_hooks(tmp_path: Path) -> None:
     assert "/plots/eval/xi/slac" in ents
 
 
-@pytest.mark.skipif(not has_command("view"), reason="view not registered")
 def test_interrupted_save_leaves_no_recording(tmp_path: Path) -> None:
     path = tmp_path / "x.rrd"
     with pytest.raises(RuntimeError), open_viewer(ViewTarget("save", path)) as v:

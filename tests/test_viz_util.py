@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from rmbuild.cli import COMMANDS, LazyGroup, main
+from rmbuild.cli import main
 
 #: set RMBUILD_DOC_IMAGES=1 to refresh docs/img/report.png and docs/img/rrd_entities.txt from the tests
 DOC_IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
@@ -22,16 +22,11 @@ def cli(*args: object) -> None:
     assert code == 0, f"rmbuild {' '.join(map(str, args))} exited {code}"
 
 
-def has_command(name: str) -> bool:
-    return name in COMMANDS and LazyGroup._available(name)
-
-
 def build_workspace(root: Path, stages: tuple[str, ...] = ("optimize",)) -> Path:
-    """simulate tiny + ingest (+ the given later stages when their commands exist); returns WORKSPACE."""
+    """simulate tiny + ingest (+ the given later stages); returns WORKSPACE."""
     cli("simulate", root / "in", "--preset", "tiny", "--seed", "7", "-q")
     ws = root / "ws"
     cli("ingest", root / "in", "-w", ws, "-q")
     for st in stages:
-        if has_command(st):
-            cli(st, "-w", ws, "-q")
+        cli(st, "-w", ws, "-q")
     return ws

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import importlib
 import logging
+import signal
 import sys
+import threading
+from typing import Any
 
 import click
 
@@ -38,25 +41,37 @@ SUMMARIES = {
 
 
 class LazyGroup(click.Group):
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return [name for name in COMMANDS if self._available(name)]
+    """Imports a command's module only when the command runs (or its help is shown). A module that fails
+    to import is an error naming the command, never a command that silently disappears."""
 
-    @staticmethod
-    def _available(name: str) -> bool:
-        mod = COMMANDS[name].split(":")[0]
-        return importlib.util.find_spec(mod) is not None
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name not in COMMANDS or not self._available(name):
+        if name not in COMMANDS:
             return None
-        mod, attr = COMMANDS[name].split(":")
-        return getattr(importlib.import_module(mod), attr)
+        return load_command(name)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(n, SUMMARIES.get(n, "")) for n in self.list_commands(ctx)]
         if rows:
             with formatter.section("Commands"):
                 formatter.write_dl(rows)
+
+
+def load_command(name: str) -> click.Command:
+    """The click command ``name`` of :data:`COMMANDS`; RmbuildError when its module cannot be imported."""
+    from rmbuild.errors import RmbuildError
+
+    mod, attr = COMMANDS[name].split(":")
+    try:
+        cmd = getattr(importlib.import_module(mod), attr)
+    except (ImportError, AttributeError) as e:
+        raise RmbuildError(f"command {name!r} is broken: {type(e).__name__}: {e} (module {mod}); "
+                           "reinstall rmbuild") from None
+    if not isinstance(cmd, click.Command):
+        raise RmbuildError(f"command {name!r} is broken: {COMMANDS[name]} is not a click command")
+    return cmd
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -80,27 +95,57 @@ def setup_logging(verbose: int, quiet: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the console script: runs the group, turns errors into one line + exit code."""
-    from rmbuild.errors import RmbuildError
+    """Entry point of the console script: runs the group, turns errors into one line + exit code.
+
+    The exit happens outside every exception handler, and the Ctrl-C handler stays in place until the
+    process has exited (a library may re-raise a caught SIGINT late)."""
+    ctrl_c = _CtrlC().install()
+    sys.exit(_dispatch(argv, ctrl_c))
+
+
+class _CtrlC:
+    """SIGINT while a command runs: the first raises KeyboardInterrupt, later ones (re-raised by libraries
+    that catch it, or a second Ctrl-C during the clean-up) are ignored; remembered, because a C extension
+    interrupted while it loads turns it into another error (e.g. "ImportError: initialization failed")."""
+
+    def __init__(self) -> None:
+        self.seen = False
+
+    def install(self) -> _CtrlC:
+        """Handle SIGINT from now on (in the main thread, unless SIGINT is ignored, as in a background job)."""
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+            signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if not self.seen:
+            self.seen = True
+            raise KeyboardInterrupt
+
+
+def _dispatch(argv: list[str] | None, ctrl_c: _CtrlC) -> int:
+    from rmbuild.errors import RmbuildError, one_line
 
     try:
         cli.main(args=argv, prog_name="rmbuild", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
-        sys.exit(130)
+    except (click.exceptions.Abort, KeyboardInterrupt):  # click turns Ctrl-C into Abort
+        click.echo("interrupted; no partial outputs were kept", err=True)
+        return 130
     except click.ClickException as e:
         e.show()
-        sys.exit(2 if e.exit_code in (1, 2) else e.exit_code)
+        return 2 if e.exit_code in (1, 2) else e.exit_code
     except RmbuildError as e:
-        click.echo(f"error: {e}", err=True)
-        sys.exit(e.exit_code)
-    except KeyboardInterrupt:
-        click.echo("interrupted; no partial outputs were kept", err=True)
-        sys.exit(130)
+        click.echo(f"error: {one_line(str(e))}", err=True)
+        return e.exit_code
     except Exception as e:  # an internal failure: one line, the traceback only with -v
+        if ctrl_c.seen:
+            click.echo("interrupted; no partial outputs were kept", err=True)
+            return 130
         args = sys.argv[1:] if argv is None else argv
         if any(a in ("-v", "-vv", "--verbose") for a in args):
             raise
-        click.echo(f"internal error: {type(e).__name__}: {e} (re-run with -v for the traceback)", err=True)
-        sys.exit(1)
-    sys.exit(0)
+        click.echo(f"internal error: {type(e).__name__}: {one_line(str(e))[:500]} (re-run with -v for the traceback)",
+                   err=True)
+        return 1
+    return 0

@@ -20,21 +20,20 @@ from rmbuild.localize.registry import describe, localizer_names
 def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):
     """Localize held-out walks with maps built from optimised, true and raw positions; report errors."""
     start(verbose, quiet)
-    from pathlib import Path
-
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
+    from rmbuild.io.workspace import Workspace
     from rmbuild.stages import evaluate as stage
 
     cfg = load_stage_config("evaluate", config_path,
                             overrides={"localizers": list(localizers) if localizers else None})
-    map_toml = Path(workspace) / "map" / "config.toml"
-    # the maps are rasterised like export-map did, unless a config file says otherwise
-    map_cfg = load_stage_config("map", config_path if config_path else (map_toml if map_toml.is_file() else None))
+    # the maps are rasterised like export-map did (map_cfg None), unless a config file says otherwise
+    map_cfg = load_stage_config("map", config_path) if config_path else None
     walks = [w.strip() for w in test_walks.split(",") if w.strip()] if test_walks else None
-    with stage_viewer(rerun, workspace, "evaluate", quiet) as viewer, progress_display(quiet) as progress:
+    with stage_viewer(rerun, workspace, "evaluate", quiet, force) as viewer, progress_display(quiet) as progress:
         report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer,
                                   force=force)
     if not quiet:
         click.echo(table)
-        click.echo(f"report: {workspace}/reports/evaluate.json, CDF plot: {workspace}/evaluate/cdf.png")
+        ws = Workspace(workspace)
+        click.echo(f"report: {ws.report_path('evaluate')}, CDF plot: {ws.path('evaluate.cdf_png')}")

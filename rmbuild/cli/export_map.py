@@ -20,14 +20,16 @@ def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, 
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
+    from rmbuild.io.workspace import Workspace
     from rmbuild.stages import export_map as stage
 
     cfg = load_stage_config("map", config_path, overrides={"cell_size_m": cell_size_m})
-    with stage_viewer(rerun, workspace, "map", quiet) as viewer, progress_display(quiet) as progress:
+    with stage_viewer(rerun, workspace, "map", quiet, force) as viewer, progress_display(quiet) as progress:
         r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force)
     if not quiet:
+        where = Workspace(workspace).path("map.cells").parent
         click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
-                   f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {workspace}/map/")
+                   f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {where}")
         left = r["frame_info"].get("left_out_walks") or []
         if left:
             click.echo(f"note: {len(left)} walk(s) placed neither by Wi-Fi links nor by anchors were left out: "

@@ -6,13 +6,16 @@ import click
 
 from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
 from rmbuild.cli.view import rerun_option
+from rmbuild.io.formats import REGISTRY, reader_names
+
+FORMAT_HELP = "Input format (default: recognised from the files): " + "; ".join(
+    f"{name}: {REGISTRY[name].description}" for name in reader_names()) + "."
 
 
 @click.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @workspace_option
-@click.option("--format", "fmt", default=None,
-              help="Input format (default: recognised from the files). Formats: rmbuild, msft-ilc, ipin.")
+@click.option("--format", "fmt", type=click.Choice(reader_names()), default=None, help=FORMAT_HELP)
 @rerun_option
 @common_options
 def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
@@ -24,7 +27,7 @@ def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
 
     cfg = load_stage_config("ingest", config_path)
     pdr_cfg = load_stage_config("pdr", config_path)
-    with stage_viewer(rerun, workspace, "ingest", quiet) as viewer, progress_display(quiet) as progress:
+    with stage_viewer(rerun, workspace, "ingest", quiet, force) as viewer, progress_display(quiet) as progress:
         s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg,
                       viewer=viewer)
     if not quiet:

@@ -16,7 +16,8 @@ def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
     f = click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress or tables.")(f)
     f = click.option("--force", is_flag=True,
-                     help="Replace this stage's existing outputs (for ingest: the workspace).")(f)
+                     help="Replace this stage's existing outputs (for ingest: the workspace) and an existing "
+                          "--rerun recording.")(f)
     f = click.option(
         "--config", "config_path", type=click.Path(dir_okay=False), default=None,
         help="TOML file with a table per stage ([ingest], [optimize], ...); unknown keys are errors.",
@@ -35,19 +36,23 @@ workspace_option = click.option(
 
 
 @contextmanager
-def stage_viewer(rerun: str | None, workspace: str, stage: str, quiet: bool = False) -> Iterator[Any]:
-    """The rerun viewer of a stage's ``--rerun`` value (a do-nothing viewer when absent); closed on exit."""
+def stage_viewer(rerun: str | None, workspace: str, stage: str, quiet: bool = False,
+                 force: bool = False) -> Iterator[Any]:
+    """The viewer of a stage's ``--rerun`` value (a do-nothing viewer when absent); closed on exit. An
+    existing recording is replaced only with ``force``."""
     from rmbuild.cli.view import rerun_target
+    from rmbuild.io.workspace import check_output_file
     from rmbuild.viz import open_viewer
 
     target = rerun_target(rerun, workspace, stage)
-    viewer = open_viewer(target, recording_name=f"rmbuild {stage}") if target is not None else None
+    if target is not None and target.path is not None:
+        check_output_file(target.path, force, "recording")
+    viewer = open_viewer(target, recording_name=f"rmbuild {stage}")
     ok = False
     try:
         yield viewer
         ok = True
     finally:
-        if viewer is not None:
-            path = viewer.close(keep=ok)
-            if path is not None and not quiet:
-                click.echo(f"rerun recording: {path}")
+        path = viewer.close(keep=ok)
+        if path is not None and not quiet:
+            click.echo(f"rerun recording: {path}")

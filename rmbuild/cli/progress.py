@@ -6,7 +6,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, Progress, SpinnerColumn, TaskID, TextColumn, TimeElapsedColumn
 
 console = Console(stderr=True)
 
@@ -14,7 +14,7 @@ console = Console(stderr=True)
 class RichProgress:
     def __init__(self, bar: Progress) -> None:
         self._bar = bar
-        self._task = None
+        self._task: TaskID | None = None
 
     def phase(self, name: str, total: float | None = None) -> None:
         if self._task is not None:

@@ -13,14 +13,15 @@ from rmbuild.cli.options import start, workspace_option
               help="HTML file to write (default WORKSPACE/report.html; PNGs go to WORKSPACE/report/).")
 @click.option("--top-aps", type=click.IntRange(1, 24), default=6, show_default=True,
               help="Heat maps of this many strongest APs.")
+@click.option("--force", is_flag=True, help="Replace an existing report (the HTML file and its PNGs).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
-def report(workspace, out, top_aps, quiet, verbose):
+def report(workspace, out, top_aps, force, quiet, verbose):
     """Write a one-page self-contained HTML report of WORKSPACE (figures, key figures, configs)."""
     start(verbose, quiet)
     from rmbuild.stages import report as stage
 
-    r = stage.run(workspace, out, heatmap_top_n=top_aps)
+    r = stage.run(workspace, out, heatmap_top_n=top_aps, force=force)
     if quiet:
         return
     click.echo(f"report: {r['path']} ({len(r['figures'])} figures, PNGs in {r['png_dir']}) in {r['time_s']:.1f} s")

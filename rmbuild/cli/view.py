@@ -21,10 +21,11 @@ def rerun_target(value: str | None, workspace: str | Path, stage: str):
     """The ViewTarget for a stage's ``--rerun`` value (None -> None: the stage gets a NullViewer)."""
     if value is None:
         return None
+    from rmbuild.io.workspace import Workspace
     from rmbuild.viz import ViewTarget, default_target
 
     if value == "auto":
-        return default_target(Path(workspace) / f"{stage}.rrd")
+        return default_target(Workspace(workspace).path(f"{stage}.rrd"))
     if value in ("spawn", "serve"):
         return ViewTarget(value)
     if not value.endswith(".rrd"):
@@ -40,13 +41,15 @@ def rerun_target(value: str | None, workspace: str | Path, stage: str):
 @click.option("--serve", is_flag=True, help="Serve the web viewer on localhost (see --port).")
 @click.option("--port", type=int, default=9090, show_default=True,
               help="Web viewer port for --serve (its gRPC server uses PORT+1).")
+@click.option("--force", is_flag=True, help="Replace an existing recording file.")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
-def view(workspace, save_path, spawn, serve, port, quiet, verbose):
+def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
     """Log what WORKSPACE holds (walks, optimisation, radio map, evaluation) to the rerun viewer."""
     start(verbose, quiet)
     if sum(map(bool, (save_path, spawn, serve))) > 1:
         raise click.UsageError("give at most one of --save, --spawn, --serve")
+    from rmbuild.io.workspace import Workspace, check_output_file
     from rmbuild.stages import view as stage
     from rmbuild.viz import ViewTarget, default_target
 
@@ -55,7 +58,9 @@ def view(workspace, save_path, spawn, serve, port, quiet, verbose):
     elif spawn or serve:
         target = ViewTarget("spawn" if spawn else "serve", port=port)
     else:
-        target = default_target(Path(workspace) / "view.rrd", port=port)
+        target = default_target(Workspace(workspace).path("view.rrd"), port=port)
+    if target.path is not None:
+        check_output_file(target.path, force, "recording")
     if target.mode == "serve":  # the viewer must outlive the logging: keep it open until Ctrl-C
         from rmbuild.viz import open_viewer
 

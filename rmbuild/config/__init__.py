@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from rmbuild.config.base import from_dict, load_toml, section_of, to_dict, to_toml
+from rmbuild.config.base import from_dict, load_toml, parse_toml, section_of, to_dict, to_toml, toml_key_line
 from rmbuild.config.evaluate import EvaluateConfig
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.optimize import OptimizeConfig
@@ -33,26 +33,48 @@ def load_stage_config(
     section: str, path: str | Path | None = None, overrides: dict[str, Any] | None = None, base: Any = None
 ):
     """The config of one stage: ``base`` (or the defaults), then the file's ``[section]`` table (nested
-    tables merge key by key), then ``overrides``.
+    tables merge key by key), then ``overrides`` (command-line options; None values are ignored).
 
-    Raises :class:`ConfigError` for an unknown section in the file, an unknown key or a bad value.
+    Raises :class:`ConfigError` naming the file, the line (when the value is set on a line of its own) and
+    the key for an unknown section in the file, an unknown key or a bad value.
     """
+    text = None
+    if path is not None:
+        p = Path(path)
+        load_toml(p)  # size, encoding and syntax errors, with their line
+        text = p.read_text(encoding="utf-8")
+    return _resolve(section, text, str(path) if path is not None else None, overrides, base)
+
+
+def load_stage_config_text(section: str, text: str, where: str) -> Any:
+    """The config of one stage from TOML ``text`` (e.g. the config.toml a stage wrote) over the defaults."""
+    return _resolve(section, text, where, None, None)
+
+
+def _resolve(section: str, text: str | None, where: str | None, overrides: dict[str, Any] | None,
+             base: Any) -> Any:
     cls = SECTIONS[section]
     data: dict[str, Any] = to_dict(base) if base is not None else {}
-    where = "config"
-    if path is not None:
-        where = str(path)
-        doc = load_toml(path)
+    if text is not None and where is not None:
+        doc = parse_toml(text, where)
         unknown = sorted(set(doc) - set(SECTIONS))
         if unknown:
-            raise ConfigError(
-                f"unknown section [{unknown[0]}] (known: {', '.join(SECTIONS)})", where
-            )
+            line = toml_key_line(text, (unknown[0],))
+            raise ConfigError(f"unknown section [{unknown[0][:80]}] (known: {', '.join(SECTIONS)})",
+                              f"{where}:{line}" if line else where)
         data = _merge(data, dict(section_of(doc, section, where)))
-    for k, v in (overrides or {}).items():
-        if v is not None:
-            data[k] = v
-    return from_dict(cls, data, f"{where}:[{section}]" if path else section)
+    given = {k: v for k, v in (overrides or {}).items() if v is not None}
+    data.update(given)
+    try:
+        return from_dict(cls, data, where or "config", prefix=f"{section}.")
+    except ConfigError as e:
+        field = (e.key or "").removeprefix(f"{section}.").split(".")[0]
+        if field in given:
+            raise ConfigError(e.problem, "command-line option", e.key, e.label) from None
+        line = toml_key_line(text, tuple(e.key.split("."))) if text is not None and e.key else None
+        if line is None:
+            raise
+        raise ConfigError(e.problem, f"{where}:{line}", e.key, e.label) from None
 
 
 def _merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
@@ -71,5 +93,6 @@ __all__ = [
     "PdrConfig",
     "SimulateConfig",
     "load_stage_config",
+    "load_stage_config_text",
     "to_toml",
 ]

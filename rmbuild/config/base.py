@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 import types
 import typing
@@ -21,12 +22,12 @@ from rmbuild.errors import ConfigError
 T = TypeVar("T")
 
 
-def _check_value(tp: Any, value: Any, where: str) -> Any:
+def _check_value(tp: Any, value: Any, key: str, where: str) -> Any:
     origin = get_origin(tp)
     if origin is Literal:
         allowed = get_args(tp)
         if value not in allowed:
-            raise ConfigError(f"must be one of {list(allowed)}, got {value!r}", where)
+            raise ConfigError(f"must be one of {list(allowed)}, got {_short(value)}", where, key)
         return value
     if origin in (typing.Union, types.UnionType):
         args = get_args(tp)
@@ -37,77 +38,225 @@ def _check_value(tp: Any, value: Any, where: str) -> Any:
             if a is type(None):
                 continue
             try:
-                return _check_value(a, value, where)
+                return _check_value(a, value, key, where)
             except ConfigError as e:
                 errors.append(e.problem)
-        raise ConfigError(" / ".join(errors), where)
+        raise ConfigError(" / ".join(errors), where, key)
     if origin is tuple:
         args = get_args(tp)
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"expected a list, got {type(value).__name__}", where)
+            raise ConfigError(f"expected a list, got {type(value).__name__}", where, key)
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_check_value(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+            if len(value) > MAX_LIST:
+                raise ConfigError(f"a list of {len(value)} values: at most {MAX_LIST}", where, key)
+            return tuple(_check_value(args[0], v, key, where) for v in value)
         if len(value) != len(args):
-            raise ConfigError(f"expected a list of {len(args)} values, got {len(value)}", where)
-        return tuple(_check_value(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+            raise ConfigError(f"expected a list of {len(args)} values, got {len(value)}", where, key)
+        return tuple(_check_value(a, v, key, where) for a, v in zip(args, value))
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise ConfigError(f"expected a table, got {type(value).__name__}", where)
-        return from_dict(tp, value, where)
+            raise ConfigError(f"expected a table, got {type(value).__name__}", where, key)
+        return from_dict(tp, value, where, prefix=f"{key}.")  # type: ignore[arg-type]
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"expected true/false, got {value!r}", where)
+            raise ConfigError(f"expected true/false, got {_short(value)}", where, key)
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"expected an integer, got {value!r}", where)
+            raise ConfigError(f"expected an integer, got {_short(value)}", where, key)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"expected a number, got {value!r}", where)
-        if not math.isfinite(float(value)):
-            raise ConfigError(f"expected a finite number, got {value!r}", where)
-        return float(value)
+            raise ConfigError(f"expected a number, got {_short(value)}", where, key)
+        try:
+            v = float(value)
+        except OverflowError:
+            v = math.inf
+        if not math.isfinite(v):
+            raise ConfigError(f"expected a finite number, got {_short(value)}", where, key)
+        return v
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"expected a string, got {value!r}", where)
+            raise ConfigError(f"expected a string, got {_short(value)}", where, key)
         return value
-    raise ConfigError(f"unsupported config type {tp!r}", where)  # pragma: no cover - programming error
+    raise ConfigError(f"unsupported config type {tp!r}", where, key)  # pragma: no cover - programming error
 
 
-def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
-    """Build a config dataclass from a plain dict, rejecting unknown keys and wrong types.
+#: longest list a list-valued field takes (e.g. localizer names)
+MAX_LIST = 64
 
-    After construction the dataclass' own ``validate()`` (if it defines one) checks ranges.
+
+def _short(value: Any) -> str:
+    """repr of a bad value, cut to a readable length (a config value may be a huge string or number)."""
+    r = repr(value)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The documented range of a numeric config field (both ends included); for a tuple field, of each
+    element. Declared with :func:`bounded`, printed by ``rmbuild config``, checked by :func:`from_dict`."""
+
+    lo: float
+    hi: float
+
+    def __contains__(self, v: object) -> bool:
+        return isinstance(v, (int, float)) and self.lo <= v <= self.hi
+
+    def __str__(self) -> str:
+        return f"[{_num(self.lo)}, {_num(self.hi)}]"
+
+
+def _num(v: float) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def bounded(default: Any, lo: float, hi: float) -> Any:
+    """A numeric config field with its documented range ``[lo, hi]``: ``x: float = bounded(2.0, 0.25, 100)``."""
+    if not lo <= hi:
+        raise ValueError(f"bounded: lo {lo} > hi {hi}")  # programming error
+    return dataclasses.field(default=default, metadata={"range": Range(lo, hi)})
+
+
+def field_range(f: dataclasses.Field) -> Range | None:
+    r = f.metadata.get("range")
+    return r if isinstance(r, Range) else None
+
+
+def _is_numeric(tp: Any) -> bool:
+    """int, float, tuples of them, or Optional of these."""
+    if tp in (int, float):
+        return True
+    origin = get_origin(tp)
+    if origin in (typing.Union, types.UnionType, tuple):
+        return any(_is_numeric(a) for a in get_args(tp) if a is not Ellipsis and a is not type(None))
+    return False
+
+
+def unbounded_fields(cls: type, prefix: str = "") -> list[str]:
+    """Numeric fields of a config dataclass (nested ones included) that declare no range: each should."""
+    out: list[str] = []
+    hints = get_type_hints(cls)
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        tp = hints[f.name]
+        if dataclasses.is_dataclass(tp):
+            out += unbounded_fields(tp, f"{prefix}{f.name}.")  # type: ignore[arg-type]
+        elif _is_numeric(tp) and field_range(f) is None:
+            out.append(f"{prefix}{f.name}")
+    return out
+
+
+def _check_range(f: dataclasses.Field, value: Any, key: str, where: str) -> None:
+    r = field_range(f)
+    if r is None or value is None:
+        return
+    values = value if isinstance(value, tuple) else (value,)
+    for i, v in enumerate(values):
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v not in r:
+            which = f" (element {i + 1})" if isinstance(value, tuple) else ""
+            raise ConfigError(f"{_short(v)}{which} is outside its range {r}", where, key)
+
+
+def check_ranges(cfg: Any, prefix: str = "") -> None:
+    """ValueError when a field of ``cfg`` (nested configs included) is outside its range: for ``validate()``
+    methods, so that configs built in Python are held to the ranges a file is."""
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(v):
+            check_ranges(v, f"{prefix}{f.name}.")
+            continue
+        try:
+            _check_range(f, v, f"{prefix}{f.name}", "")
+        except ConfigError as e:
+            raise ValueError(str(e)) from None
+
+
+def from_dict(cls: type[T], data: dict[str, Any], where: str = "config", prefix: str = "") -> T:
+    """Build a config dataclass from a plain dict, rejecting unknown keys, wrong types and values outside
+    their documented ranges; then the dataclass' own ``validate()`` (if any) checks rules between fields.
+
+    ``prefix``: the dotted key of this table (``map.fill``), for error messages.
     """
     hints = get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(data) - names)
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(data) - set(fields))
     if unknown:
-        raise ConfigError(
-            f"unknown key {unknown[0]!r} (known: {', '.join(sorted(names))})", f"{where}"
-        )
-    kwargs = {k: _check_value(hints[k], v, f"{where}.{k}") for k, v in data.items()}
+        name = str(unknown[0])[:80]
+        raise ConfigError(f"unknown key {name!r} (known: {', '.join(sorted(fields))})", where,
+                          key=f"{prefix}{name}", label=prefix.rstrip(".") or None)
+    kwargs = {}
+    for k, v in data.items():
+        key = f"{prefix}{k}"
+        kwargs[k] = _check_value(hints[k], v, key, where)
+        _check_range(fields[k], kwargs[k], key, where)
     obj = cls(**kwargs)
     validate = getattr(obj, "validate", None)
     if callable(validate):
         try:
             validate()
         except ValueError as e:
-            raise ConfigError(str(e), where) from None
+            raise ConfigError(str(e), where, key=prefix.rstrip(".") or None) from None
     return obj
 
 
+#: a config file is a few kB; anything this large is not one (and is not read into memory)
+MAX_CONFIG_BYTES = 1 << 20
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file into a dict; a syntax error becomes a one-line :class:`ConfigError`."""
+    """Read a TOML file into a dict; every problem is a one-line :class:`ConfigError` naming file and line."""
     p = Path(path)
     try:
-        with p.open("rb") as fh:
-            return tomllib.load(fh)
+        if p.stat().st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{p.stat().st_size:,} bytes: too large for a config file", str(p))
+        data = p.read_bytes()
     except FileNotFoundError:
         raise ConfigError("config file not found", str(p)) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, not a config file", str(p)) from None
+    except OSError as e:
+        raise ConfigError(f"unreadable ({e.strerror})", str(p)) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[: e.start].count(b"\n") + 1
+        raise ConfigError(f"not UTF-8 text ({e.reason})", f"{p}:{line}") from None
+    return parse_toml(text, str(p))
+
+
+def parse_toml(text: str, where: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"invalid TOML: {e}", str(p)) from None
+        m = re.search(r"\(at line (\d+), column \d+\)", str(e))
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(e))
+        raise ConfigError(f"invalid TOML: {msg}", f"{where}:{m.group(1)}" if m else where) from None
+    except RecursionError:
+        raise ConfigError("invalid TOML: arrays or tables nested too deeply", where) from None
+
+
+_HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
+_KEY = re.compile(r"^\s*([A-Za-z0-9_\-\.\"' ]+?)\s*=")
+
+
+def _dotted(s: str) -> tuple[str, ...]:
+    return tuple(part.strip().strip("\"'") for part in s.split("."))
+
+
+def toml_key_line(text: str, key: tuple[str, ...]) -> int | None:
+    """The line (from 1) where the dotted ``key`` is set in TOML ``text``, when it is set by a plain
+    ``key = value`` line under its table header (or as a dotted key); None otherwise."""
+    table: tuple[str, ...] = ()
+    for n, line in enumerate(text.splitlines(), 1):
+        if m := _HEADER.match(line):
+            table = _dotted(m.group(1))
+            if table == key:
+                return n
+        elif m := _KEY.match(line):
+            full = table + _dotted(m.group(1))
+            if full == key or key[: len(full)] == full and len(full) > len(table):
+                return n
+    return None
 
 
 def _toml_value(v: Any) -> str:
@@ -147,7 +296,7 @@ def field_comments(cls: type) -> dict[str, list[str]]:
 def to_toml(cfg: Any, section: str, comments: bool = False) -> str:
     """Serialise a config dataclass (nested dataclasses become sub-tables) as TOML text.
 
-    ``comments``: put each field's source comment (unit, meaning, the paper's value) above it.
+    ``comments``: put each field's source comment (unit, meaning, the paper's value) and its range above it.
     """
     lines: list[str] = []
     nested: list[tuple[str, Any]] = []
@@ -159,6 +308,8 @@ def to_toml(cfg: Any, section: str, comments: bool = False) -> str:
             nested.append((f"{section}.{f.name}", v))
             continue
         lines.extend(f"# {c}" for c in notes.get(f.name, []))
+        if comments and (r := field_range(f)) is not None:
+            lines.append(f"# range: {r}")
         if v is None:
             lines.append(f"# {f.name} = (unset)")
         else:

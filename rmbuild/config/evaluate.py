@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from rmbuild.config.base import bounded, check_ranges
 from rmbuild.config.localize import (
     BayesConfig,
     HistogramLocConfig,
@@ -24,30 +25,25 @@ class KnnConfig:
     """FL / kNN and distance-weighted kNN (He et al. 2015 baseline, Chen et al. 2018 eq. 3-4)."""
 
     # 1; K nearest reference points (He et al. 2015's comparison: 15).
-    k: int = 15
+    k: int = bounded(15, 1, 1000)
     # "fill": a missing reading counts as fill_dbm (Gu et al. 2017); "exclude": distances use only the APs
     # detected in both the query and the reference point.
     missing: Literal["fill", "exclude"] = "fill"
     # dBm; value of a missing reading under missing = "fill" (Gu et al. 2017: -110).
-    fill_dbm: float = -110.0
+    fill_dbm: float = bounded(-110.0, -200.0, 0.0)
     # "euclidean": sqrt(Σ_j (a_j − b_j)²) (plain; scikit-learn's metric on filled vectors);
     # "rms": sqrt(Σ_j (a_j − b_j)² / M), M = |union| of detected APs under "fill" (Gu et al. 2017 eq. 9) or
     # |shared| under "exclude" (also the normalisation used by "exclude" with either choice).
     metric: Literal["euclidean", "rms"] = "euclidean"
     # 1; under missing = "exclude", a reference point sharing fewer APs with the query is never a neighbour.
-    min_shared_aps: int = 1
+    min_shared_aps: int = bounded(1, 1, 1000)
     # "cells": the grid cells of the radio map are the RPs; "nodes": every map node's own fingerprint is.
     reference: Literal["cells", "nodes"] = "cells"
     # dB; distance-weighted kNN weight = 1 / max(d, weight_eps_db) (sklearn semantics when 0: exact matches win).
-    weight_eps_db: float = 0.0
+    weight_eps_db: float = bounded(0.0, 0.0, 100.0)
 
     def validate(self) -> None:
-        if self.k < 1:
-            raise ValueError("knn.k must be >= 1")
-        if self.min_shared_aps < 1:
-            raise ValueError("knn.min_shared_aps must be >= 1")
-        if self.weight_eps_db < 0:
-            raise ValueError("knn.weight_eps_db must be >= 0")
+        check_ranges(self, "knn.")
 
 
 @dataclass(frozen=True)
@@ -56,9 +52,9 @@ class EvaluateConfig:
     localizers: tuple[str, ...] = ("knn", "wknn")
     # 1; default split when no walk has role "test": walk i (in walks order) is a test walk when
     # i % split_every == split_offset. Never splits a walk.
-    split_every: int = 5
+    split_every: int = bounded(5, 2, 1000)
     # 1; see split_every (0 <= split_offset < split_every).
-    split_offset: int = 2
+    split_offset: int = bounded(2, 0, 999)
     # "scan": every Wi-Fi scan (readings sharing walk and time) is one query; "node": every node's mean
     # fingerprint is one query.
     query: Literal["scan", "node"] = "scan"
@@ -79,8 +75,7 @@ class EvaluateConfig:
     def validate(self) -> None:
         if not self.localizers:
             raise ValueError("localizers must name at least one localizer")
-        if self.split_every < 2:
-            raise ValueError("split_every must be >= 2")
+        check_ranges(self)
         if not 0 <= self.split_offset < self.split_every:
             raise ValueError("split_offset must be in [0, split_every)")
         self.knn.validate()

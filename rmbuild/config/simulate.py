@@ -11,82 +11,63 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
+from rmbuild.config.base import bounded, check_ranges
 
-def _range(name: str, r: tuple[float, float], lo: float | None = None, hi: float | None = None) -> None:
+#: steps; the most a simulation may draw (n_long_walks x long max + n_short_walks x short max): "large" has
+#: ~61,000; 1,000,000 steps keep a simulation within a few GB
+MAX_SIMULATED_STEPS = 1_000_000
+
+
+def _ordered(name: str, r: tuple[float, float]) -> None:
     if not r[0] <= r[1]:
         raise ValueError(f"{name}: lower bound {r[0]} > upper bound {r[1]}")
-    if lo is not None and r[0] < lo:
-        raise ValueError(f"{name}: values must be >= {lo}, got {r[0]}")
-    if hi is not None and r[1] > hi:
-        raise ValueError(f"{name}: values must be <= {hi}, got {r[1]}")
-
-
-def _pos(name: str, v: float, strict: bool = True) -> None:
-    if (strict and not v > 0) or (not strict and not v >= 0):
-        raise ValueError(f"{name} must be {'> 0' if strict else '>= 0'}, got {v}")
-
-
-def _prob(name: str, v: float) -> None:
-    if not 0.0 <= v <= 1.0:
-        raise ValueError(f"{name} must be in [0, 1], got {v}")
 
 
 @dataclass(frozen=True)
 class VenueConfig:
     # m; building extent along x (east). The hall takes the east end, offices + corridors the rest.
-    width_m: float = 130.0
+    width_m: float = bounded(130.0, 10.0, 1000.0)
     # m; building extent along y (north).
-    height_m: float = 80.0
+    height_m: float = bounded(80.0, 10.0, 1000.0)
     # count; corridors running along x through the office part (>= 1).
-    n_x_corridors: int = 3
+    n_x_corridors: int = bounded(3, 1, 50)
     # count; corridors running along y through the office part (0 = none).
-    n_y_corridors: int = 3
+    n_y_corridors: int = bounded(3, 0, 50)
     # m; clear width of every corridor.
-    corridor_width_m: float = 3.0
+    corridor_width_m: float = bounded(3.0, 1.0, 10.0)
     # m; nominal room width along its corridor (rooms are split evenly, so actual widths vary a little).
-    room_width_m: float = 7.0
+    room_width_m: float = bounded(7.0, 2.0, 50.0)
     # m; a block deeper than twice this holds two rows of rooms (one per corridor), else one row.
-    min_room_depth_m: float = 5.0
+    min_room_depth_m: float = bounded(5.0, 2.0, 50.0)
     # m; door opening width (a gap in the room's corridor wall).
-    door_width_m: float = 1.2
+    door_width_m: float = bounded(1.2, 0.6, 20.0)
     # m; width (along x) of the open hall at the east end spanning the full height; 0 = no hall.
-    hall_width_m: float = 38.0
+    hall_width_m: float = bounded(38.0, 0.0, 800.0)
     # count; small closed boxes (shops, kiosks, 3-5 m wide) standing in the hall.
-    n_hall_kiosks: int = 6
+    n_hall_kiosks: int = bounded(6, 0, 100)
     # m; spacing of the walkable grid laid over the hall (navigation graph).
-    hall_grid_m: float = 5.0
+    hall_grid_m: float = bounded(5.0, 2.0, 20.0)
     # dB; attenuation of one corridor / hall-facing wall (signal crossing it once).
-    corridor_wall_atten_db: float = 5.0
+    corridor_wall_atten_db: float = bounded(5.0, 0.0, 40.0)
     # dB; attenuation of one partition wall between rooms.
-    partition_atten_db: float = 3.5
+    partition_atten_db: float = bounded(3.5, 0.0, 40.0)
     # dB; attenuation of one kiosk wall in the hall.
-    kiosk_atten_db: float = 2.5
+    kiosk_atten_db: float = bounded(2.5, 0.0, 40.0)
     # dB; attenuation of the building's outer wall (only for plots: everything is inside).
-    outer_wall_atten_db: float = 12.0
+    outer_wall_atten_db: float = bounded(12.0, 0.0, 40.0)
     # count; landmarks (corridor junctions and hall points; corridor stops if there are none) where
     # walkers press a "fix" button.
-    n_landmarks: int = 8
+    n_landmarks: int = bounded(8, 0, 1000)
     # m; a walker passing within this distance of a landmark records a fix.
-    landmark_radius_m: float = 1.5
+    landmark_radius_m: float = bounded(1.5, 0.1, 20.0)
     # probability that a walker who passes a landmark actually records the fix.
-    landmark_press_prob: float = 0.9
+    landmark_press_prob: float = bounded(0.9, 0.0, 1.0)
 
     def validate(self) -> None:
-        _pos("venue.width_m", self.width_m)
-        _pos("venue.height_m", self.height_m)
-        if self.n_x_corridors < 1:
-            raise ValueError("venue.n_x_corridors must be >= 1")
-        if self.n_y_corridors < 0:
-            raise ValueError("venue.n_y_corridors must be >= 0")
-        if not 1.0 <= self.corridor_width_m <= 10.0:
-            raise ValueError("venue.corridor_width_m must be in [1, 10]")
-        if not 2.0 <= self.room_width_m <= 50.0:
-            raise ValueError("venue.room_width_m must be in [2, 50]")
-        if not 2.0 <= self.min_room_depth_m <= 50.0:
-            raise ValueError("venue.min_room_depth_m must be in [2, 50]")
-        if not 0.6 <= self.door_width_m <= min(self.room_width_m, self.corridor_width_m * 2):
-            raise ValueError("venue.door_width_m must be in [0.6, room_width_m]")
-        if not 0.0 <= self.hall_width_m <= 0.8 * self.width_m:
+        check_ranges(self, "venue.")
+        if self.door_width_m > min(self.room_width_m, self.corridor_width_m * 2):
+            raise ValueError("venue.door_width_m must be <= room_width_m and <= 2 corridor_width_m")
+        if self.hall_width_m > 0.8 * self.width_m:
             raise ValueError("venue.hall_width_m must be in [0, 0.8 width_m]")
         if 0.0 < self.hall_width_m < 10.0:
             raise ValueError("venue.hall_width_m must be 0 (no hall) or >= 10 m")
@@ -96,272 +77,193 @@ class VenueConfig:
             raise ValueError("venue: too many x corridors for height_m (no room depth left)")
         if self.n_y_corridors > 0 and office_w / (self.n_y_corridors + 1) < self.corridor_width_m + 2.0:
             raise ValueError("venue: too many y corridors for the office width")
-        if self.n_hall_kiosks < 0:
-            raise ValueError("venue.n_hall_kiosks must be >= 0")
-        if not 2.0 <= self.hall_grid_m <= 20.0:
-            raise ValueError("venue.hall_grid_m must be in [2, 20]")
-        for name in ("corridor_wall_atten_db", "partition_atten_db", "kiosk_atten_db", "outer_wall_atten_db"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 40.0:
-                raise ValueError(f"venue.{name} must be in [0, 40] dB")
-        if self.n_landmarks < 0:
-            raise ValueError("venue.n_landmarks must be >= 0")
-        _pos("venue.landmark_radius_m", self.landmark_radius_m)
-        _prob("venue.landmark_press_prob", self.landmark_press_prob)
+
 
 
 @dataclass(frozen=True)
 class RadioConfig:
     # count; physical access points. Each has a 2.4 GHz radio and maybe a 5 GHz one; each radio 1-2 BSSIDs.
-    n_aps: int = 60
+    n_aps: int = bounded(60, 1, 5000)
     # probability that an AP also has a 5 GHz radio.
-    dual_band_fraction: float = 0.6
+    dual_band_fraction: float = bounded(0.6, 0.0, 1.0)
     # probability that a radio broadcasts a second SSID (a second BSSID with the same signal field).
-    multi_ssid_fraction: float = 0.3
+    multi_ssid_fraction: float = bounded(0.3, 0.0, 1.0)
     # m; minimum distance between two APs (placement by rejection sampling).
-    min_ap_spacing_m: float = 6.0
+    min_ap_spacing_m: float = bounded(6.0, 0.0, 100.0)
     # dBm; range of the mean RSSI at 1 m of a 2.4 GHz radio (the "tx power" of the log-distance model).
-    tx_power_24_dbm: tuple[float, float] = (-42.0, -34.0)
+    tx_power_24_dbm: tuple[float, float] = bounded((-42.0, -34.0), -80.0, 0.0)
     # dBm; same for 5 GHz radios (weaker at 1 m).
-    tx_power_5_dbm: tuple[float, float] = (-48.0, -40.0)
+    tx_power_5_dbm: tuple[float, float] = bounded((-48.0, -40.0), -80.0, 0.0)
     # 1; range of the per-radio path-loss exponent n in RSS = P0 - 10 n log10(d / 1 m).
-    path_loss_exp: tuple[float, float] = (2.2, 3.3)
+    path_loss_exp: tuple[float, float] = bounded((2.2, 3.3), 1.5, 6.0)
     # 1; wall attenuation multiplier of 5 GHz radios relative to 2.4 GHz.
-    wall_factor_5ghz: float = 1.5
+    wall_factor_5ghz: float = bounded(1.5, 0.5, 4.0)
     # dB; sigma of the spatially correlated shadowing of each radio (static: part of the true field).
-    shadow_sigma_db: float = 5.0
+    shadow_sigma_db: float = bounded(5.0, 0.0, 20.0)
     # m; correlation length of the shadowing (Gaussian-kernel random Fourier features).
-    shadow_corr_m: float = 5.0
+    shadow_corr_m: float = bounded(5.0, 0.5, 100.0)
     # count; random Fourier features per radio for the shadowing field.
-    n_shadow_features: int = 48
+    n_shadow_features: int = bounded(48, 1, 1024)
     # dB; sigma of the independent per-reading noise.
-    noise_sigma_db: float = 4.0
+    noise_sigma_db: float = bounded(4.0, 0.0, 20.0)
     # dB; sigma of a per-(walk, radio) offset constant during a walk: the field changes between
     # recordings (people, doors, furniture, AP power control).
-    walk_offset_sigma_db: float = 3.0
+    walk_offset_sigma_db: float = bounded(3.0, 0.0, 20.0)
     # dB; extra loss when the walker's body is between phone and AP (scaled by (1 - cos angle) / 2).
-    body_loss_db: float = 3.0
+    body_loss_db: float = bounded(3.0, 0.0, 20.0)
     # dBm; hard detection floor: readings below it are never reported.
-    detect_floor_dbm: float = -100.0
+    detect_floor_dbm: float = bounded(-100.0, -130.0, -50.0)
     # dBm; RSSI at which a reading is detected with probability 1/2 (logistic soft floor).
-    detect_mid_dbm: float = -95.0
+    detect_mid_dbm: float = bounded(-95.0, -130.0, -30.0)
     # dB; width (logistic scale) of the soft detection floor.
-    detect_soft_db: float = 3.0
+    detect_soft_db: float = bounded(3.0, 0.1, 20.0)
     # probability that a reading of a strong AP is nevertheless missing from a scan (missed beacons,
     # incomplete channel sweeps); with the soft floor, the main source of false RSS vicinity pairs.
-    miss_prob: float = 0.15
+    miss_prob: float = bounded(0.15, 0.0, 0.99)
     # s; range of a device's scan period (each scan = all detected BSSIDs at one time).
-    scan_period_s: tuple[float, float] = (2.0, 4.0)
+    scan_period_s: tuple[float, float] = bounded((2.0, 4.0), 0.2, 60.0)
     # s; sigma of the jitter added to every scan interval.
-    scan_jitter_s: float = 0.15
+    scan_jitter_s: float = bounded(0.15, 0.0, 15.0)
     # s; a scan sweeps the channels during this interval before its t_s: each reading is taken at a
     # random time in it (so at a position up to ~2 m behind the walker's position at t_s).
-    scan_duration_s: float = 1.5
+    scan_duration_s: float = bounded(1.5, 0.0, 60.0)
     # probability that a BSSID's entry of a scan is a stale copy of the previous scan's (phone scan cache).
-    stale_prob: float = 0.15
+    stale_prob: float = bounded(0.15, 0.0, 0.99)
 
     def validate(self) -> None:
-        if self.n_aps < 1:
-            raise ValueError("radio.n_aps must be >= 1")
-        _prob("radio.dual_band_fraction", self.dual_band_fraction)
-        _prob("radio.multi_ssid_fraction", self.multi_ssid_fraction)
-        _pos("radio.min_ap_spacing_m", self.min_ap_spacing_m, strict=False)
-        _range("radio.tx_power_24_dbm", self.tx_power_24_dbm, -80.0, 0.0)
-        _range("radio.tx_power_5_dbm", self.tx_power_5_dbm, -80.0, 0.0)
-        _range("radio.path_loss_exp", self.path_loss_exp, 1.5, 6.0)
-        if not 0.5 <= self.wall_factor_5ghz <= 4.0:
-            raise ValueError("radio.wall_factor_5ghz must be in [0.5, 4]")
-        if not 0.0 <= self.shadow_sigma_db <= 20.0:
-            raise ValueError("radio.shadow_sigma_db must be in [0, 20]")
-        _pos("radio.shadow_corr_m", self.shadow_corr_m)
-        if not 1 <= self.n_shadow_features <= 1024:
-            raise ValueError("radio.n_shadow_features must be in [1, 1024]")
-        if not 0.0 <= self.noise_sigma_db <= 20.0:
-            raise ValueError("radio.noise_sigma_db must be in [0, 20]")
-        if not 0.0 <= self.walk_offset_sigma_db <= 20.0:
-            raise ValueError("radio.walk_offset_sigma_db must be in [0, 20]")
-        if not 0.0 <= self.body_loss_db <= 20.0:
-            raise ValueError("radio.body_loss_db must be in [0, 20]")
-        if not -130.0 <= self.detect_floor_dbm <= -50.0:
-            raise ValueError("radio.detect_floor_dbm must be in [-130, -50]")
+        check_ranges(self, "radio.")
+        for name in ("tx_power_24_dbm", "tx_power_5_dbm", "path_loss_exp", "scan_period_s"):
+            _ordered(f"radio.{name}", getattr(self, name))
         if self.detect_mid_dbm < self.detect_floor_dbm:
             raise ValueError("radio.detect_mid_dbm must be >= detect_floor_dbm")
-        _pos("radio.detect_soft_db", self.detect_soft_db)
-        if not 0.0 <= self.miss_prob < 1.0:
-            raise ValueError("radio.miss_prob must be in [0, 1)")
-        _range("radio.scan_period_s", self.scan_period_s, 0.2, 60.0)
-        _pos("radio.scan_jitter_s", self.scan_jitter_s, strict=False)
         if self.scan_jitter_s > 0.25 * self.scan_period_s[0]:
             raise ValueError("radio.scan_jitter_s must be <= a quarter of the shortest scan period")
-        if not 0.0 <= self.scan_duration_s <= self.scan_period_s[0]:
+        if self.scan_duration_s > self.scan_period_s[0]:
             raise ValueError("radio.scan_duration_s must be in [0, shortest scan period]")
-        if not 0.0 <= self.stale_prob < 1.0:
-            raise ValueError("radio.stale_prob must be in [0, 1)")
+
 
 
 @dataclass(frozen=True)
 class WalkersConfig:
     # count; users (people); each has its own step model S = alpha f + beta.
-    n_users: int = 6
+    n_users: int = bounded(6, 1, 1000)
     # count; long patrol walks (visit rooms, hall, corridors; revisit places).
-    n_long_walks: int = 6
+    n_long_walks: int = bounded(6, 0, 1000)
     # steps; range of the length of a long walk.
-    long_walk_steps: tuple[float, float] = (650.0, 900.0)
+    long_walk_steps: tuple[float, float] = bounded((650.0, 900.0), 2.0, 100000.0)
     # count; short walks that mostly cross the venue along corridors / through the hall.
-    n_short_walks: int = 4
+    n_short_walks: int = bounded(4, 0, 1000)
     # steps; range of the length of a short walk.
-    short_walk_steps: tuple[float, float] = (50.0, 150.0)
+    short_walk_steps: tuple[float, float] = bounded((50.0, 150.0), 2.0, 100000.0)
     # "random": short walks head for random corridor/hall places; "end_to_end": along the longest
     # x corridor from one end to the other (Gu et al. 2017's straight-walk experiment).
     short_walk_route: Literal["random", "end_to_end"] = "random"
     # count; walks (the last ones) with role "test", held out for evaluation.
-    n_test_walks: int = 2
+    n_test_walks: int = bounded(2, 0, 2000)
     # Hz; range of a user's mean step frequency.
-    step_freq_hz: tuple[float, float] = (1.5, 2.1)
+    step_freq_hz: tuple[float, float] = bounded((1.5, 2.1), 0.5, 4.0)
     # Hz; sigma of a walk's step frequency around its user's mean.
-    step_freq_walk_sd_hz: float = 0.06
+    step_freq_walk_sd_hz: float = bounded(0.06, 0.0, 0.5)
     # Hz; sigma of the slow (AR(1), 0.95 per step) step-to-step variation of the step frequency.
-    step_freq_step_sd_hz: float = 0.05
+    step_freq_step_sd_hz: float = bounded(0.05, 0.0, 0.5)
     # m/Hz; range of a user's alpha in the step model S = alpha f + beta.
-    step_alpha: tuple[float, float] = (0.3, 0.5)
+    step_alpha: tuple[float, float] = bounded((0.3, 0.5), 0.0, 2.0)
     # m; range of a user's step length at 1.8 Hz (sets beta = S(1.8) - 1.8 alpha).
-    step_len_at_1p8hz_m: tuple[float, float] = (0.62, 0.78)
+    step_len_at_1p8hz_m: tuple[float, float] = bounded((0.62, 0.78), 0.2, 1.5)
     # m; max |lateral offset| of a walk from the path centre line (kept per walk).
-    lateral_offset_m: float = 0.4
+    lateral_offset_m: float = bounded(0.4, 0.0, 0.54)
     # m; sigma of the small smooth (AR(1)) lateral wiggle around that offset.
-    wiggle_sd_m: float = 0.1
+    wiggle_sd_m: float = bounded(0.1, 0.0, 0.5)
     # m; waypoints are jittered by up to this in corridors (more in the hall), so routes differ.
-    waypoint_jitter_m: float = 0.4
+    waypoint_jitter_m: float = bounded(0.4, 0.0, 1.0)
     # probability that a long walk's next destination is a room (else a corridor/hall place).
-    room_visit_prob: float = 0.35
+    room_visit_prob: float = bounded(0.35, 0.0, 1.0)
     # probability of a pause (standing; scans go on, no steps) at a destination.
-    pause_prob: float = 0.3
+    pause_prob: float = bounded(0.3, 0.0, 1.0)
     # s; range of a pause's duration.
-    pause_s: tuple[float, float] = (3.0, 20.0)
+    pause_s: tuple[float, float] = bounded((3.0, 20.0), 0.0, 3600.0)
     # "route": the first pose faces along the first step; "random": the walker starts facing a random
     # direction and turns onto the route on the first step (Gu et al. 2017's random initial headings).
     start_facing: Literal["route", "random"] = "route"
 
     def validate(self) -> None:
-        if self.n_users < 1:
-            raise ValueError("walkers.n_users must be >= 1")
-        if self.n_long_walks < 0 or self.n_short_walks < 0:
-            raise ValueError("walkers.n_long_walks / n_short_walks must be >= 0")
-        if self.n_long_walks + self.n_short_walks < 1:
+        check_ranges(self, "walkers.")
+        for name in ("long_walk_steps", "short_walk_steps", "step_freq_hz", "step_alpha", "step_len_at_1p8hz_m",
+                     "pause_s"):
+            _ordered(f"walkers.{name}", getattr(self, name))
+        n_walks = self.n_long_walks + self.n_short_walks
+        if n_walks < 1:
             raise ValueError("walkers: need at least one walk")
-        _range("walkers.long_walk_steps", self.long_walk_steps, 2.0, 1e6)
-        _range("walkers.short_walk_steps", self.short_walk_steps, 2.0, 1e6)
-        if not 0 <= self.n_test_walks <= self.n_long_walks + self.n_short_walks:
+        if self.n_test_walks > n_walks:
             raise ValueError("walkers.n_test_walks must be in [0, number of walks]")
-        _range("walkers.step_freq_hz", self.step_freq_hz, 0.5, 4.0)
-        _pos("walkers.step_freq_walk_sd_hz", self.step_freq_walk_sd_hz, strict=False)
-        _pos("walkers.step_freq_step_sd_hz", self.step_freq_step_sd_hz, strict=False)
-        if self.step_freq_walk_sd_hz > 0.5 or self.step_freq_step_sd_hz > 0.5:
-            raise ValueError("walkers: step frequency sigmas must be <= 0.5 Hz")
-        _range("walkers.step_alpha", self.step_alpha, 0.0, 2.0)
-        _range("walkers.step_len_at_1p8hz_m", self.step_len_at_1p8hz_m, 0.2, 1.5)
-        if not 0.0 <= self.lateral_offset_m <= 0.45 * 1.2:
-            raise ValueError("walkers.lateral_offset_m must be in [0, 0.54] (doors are ~1.2 m wide)")
-        if not 0.0 <= self.wiggle_sd_m <= 0.5:
-            raise ValueError("walkers.wiggle_sd_m must be in [0, 0.5]")
-        if not 0.0 <= self.waypoint_jitter_m <= 1.0:
-            raise ValueError("walkers.waypoint_jitter_m must be in [0, 1]")
-        _prob("walkers.room_visit_prob", self.room_visit_prob)
-        _prob("walkers.pause_prob", self.pause_prob)
-        _range("walkers.pause_s", self.pause_s, 0.0, 3600.0)
+        steps = self.n_long_walks * self.long_walk_steps[1] + self.n_short_walks * self.short_walk_steps[1]
+        if steps > MAX_SIMULATED_STEPS:
+            raise ValueError(f"walkers: up to {steps:,.0f} steps in all; at most {MAX_SIMULATED_STEPS:,}")
+
 
 
 @dataclass(frozen=True)
 class ImuConfig:
     # 1; sigma of a walk's step-length scale error (0.03 = 3 %).
-    step_scale_sd: float = 0.03
+    step_scale_sd: float = bounded(0.03, 0.0, 0.3)
     # m; sigma of the independent per-step step-length noise.
-    step_noise_m: float = 0.02
+    step_noise_m: float = bounded(0.02, 0.0, 0.3)
     # deg/s; sigma of a walk's initial gyro (heading) bias.
-    heading_bias_sd_dps: float = 0.02
+    heading_bias_sd_dps: float = bounded(0.02, 0.0, 5.0)
     # deg/s/sqrt(s); random-walk intensity of the heading bias.
-    heading_bias_rw_dps: float = 0.002
+    heading_bias_rw_dps: float = bounded(0.002, 0.0, 1.0)
     # deg; sigma of the per-step heading increment noise (accumulates as a random walk).
-    heading_step_noise_deg: float = 0.3
+    heading_step_noise_deg: float = bounded(0.3, 0.0, 20.0)
 
     def validate(self) -> None:
-        if not 0.0 <= self.step_scale_sd <= 0.3:
-            raise ValueError("imu.step_scale_sd must be in [0, 0.3]")
-        if not 0.0 <= self.step_noise_m <= 0.3:
-            raise ValueError("imu.step_noise_m must be in [0, 0.3]")
-        if not 0.0 <= self.heading_bias_sd_dps <= 5.0:
-            raise ValueError("imu.heading_bias_sd_dps must be in [0, 5]")
-        if not 0.0 <= self.heading_bias_rw_dps <= 1.0:
-            raise ValueError("imu.heading_bias_rw_dps must be in [0, 1]")
-        if not 0.0 <= self.heading_step_noise_deg <= 20.0:
-            raise ValueError("imu.heading_step_noise_deg must be in [0, 20]")
+        check_ranges(self, "imu.")
+
 
 
 @dataclass(frozen=True)
 class MagnetometerConfig:
     # probability that a device has no magnetometer (its walks get NaN yaw_abs_rad).
-    missing_fraction: float = 0.0
+    missing_fraction: float = bounded(0.0, 0.0, 1.0)
     # deg; sigma of a walk's constant heading offset (device calibration / mounting).
-    walk_offset_sd_deg: float = 4.0
+    walk_offset_sd_deg: float = bounded(4.0, 0.0, 90.0)
     # deg; sigma of the spatially smooth indoor disturbance of the measured heading.
-    disturbance_sd_deg: float = 10.0
+    disturbance_sd_deg: float = bounded(10.0, 0.0, 90.0)
     # m; correlation length of the disturbance field.
-    disturbance_corr_m: float = 4.0
+    disturbance_corr_m: float = bounded(4.0, 0.5, 100.0)
     # count; hot spots (steel, escalators) where the disturbance is amplified.
-    n_hotspots: int = 6
+    n_hotspots: int = bounded(6, 0, 1000)
     # 1; extra disturbance gain at a hot spot's centre (1 = doubled).
-    hotspot_gain: float = 2.0
+    hotspot_gain: float = bounded(2.0, 0.0, 10.0)
     # m; radius (Gaussian sigma) of a hot spot.
-    hotspot_radius_m: float = 5.0
+    hotspot_radius_m: float = bounded(5.0, 0.1, 100.0)
     # deg; sigma of the independent per-step noise.
-    noise_sd_deg: float = 3.0
+    noise_sd_deg: float = bounded(3.0, 0.0, 90.0)
     # rad; the constant 1-sigma a device reports with its heading (yaw_abs_sigma_rad).
-    reported_sigma_rad: float = 0.25
+    reported_sigma_rad: float = bounded(0.25, 0.001, 3.2)
     # deg; rotation of the magnetometer's world frame relative to the building frame (0 = aligned).
-    north_offset_deg: float = 0.0
+    north_offset_deg: float = bounded(0.0, -360.0, 360.0)
 
     def validate(self) -> None:
-        _prob("magnetometer.missing_fraction", self.missing_fraction)
-        for name in ("walk_offset_sd_deg", "disturbance_sd_deg", "noise_sd_deg"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 90.0:
-                raise ValueError(f"magnetometer.{name} must be in [0, 90] deg")
-        _pos("magnetometer.disturbance_corr_m", self.disturbance_corr_m)
-        if self.n_hotspots < 0:
-            raise ValueError("magnetometer.n_hotspots must be >= 0")
-        if not 0.0 <= self.hotspot_gain <= 10.0:
-            raise ValueError("magnetometer.hotspot_gain must be in [0, 10]")
-        _pos("magnetometer.hotspot_radius_m", self.hotspot_radius_m)
-        if not 0.0 < self.reported_sigma_rad <= 3.2:
-            raise ValueError("magnetometer.reported_sigma_rad must be in (0, 3.2]")
-        if not -360.0 <= self.north_offset_deg <= 360.0:
-            raise ValueError("magnetometer.north_offset_deg must be in [-360, 360]")
+        check_ranges(self, "magnetometer.")
+
 
 
 @dataclass(frozen=True)
 class DevicesConfig:
     # count; phones used for the map walks.
-    n_devices: int = 4
+    n_devices: int = bounded(4, 1, 1000)
     # 1; sigma of a map device's RSS gain k around 1 (device model phi~ = k phi + b, He et al. 2015).
-    k_sd: float = 0.05
+    k_sd: float = bounded(0.05, 0.0, 0.5)
     # dB; sigma of a map device's RSS offset b around 0.
-    b_sd_db: float = 2.0
+    b_sd_db: float = bounded(2.0, 0.0, 20.0)
     # (k, b); when set, the test walks use an extra device "dtest" with this RSS model.
-    test_device: tuple[float, float] | None = None
+    test_device: tuple[float, float] | None = bounded(None, -30.0, 30.0)
 
     def validate(self) -> None:
-        if self.n_devices < 1:
-            raise ValueError("devices.n_devices must be >= 1")
-        if not 0.0 <= self.k_sd <= 0.5:
-            raise ValueError("devices.k_sd must be in [0, 0.5]")
-        if not 0.0 <= self.b_sd_db <= 20.0:
-            raise ValueError("devices.b_sd_db must be in [0, 20]")
-        if self.test_device is not None:
-            k, b = self.test_device
-            if not 0.1 <= k <= 6.0:
-                raise ValueError("devices.test_device k must be in [0.1, 6]")
-            if not -30.0 <= b <= 30.0:
-                raise ValueError("devices.test_device b must be in [-30, 30] dB")
+        check_ranges(self, "devices.")
+        if self.test_device is not None and not 0.1 <= self.test_device[0] <= 6.0:
+            raise ValueError("devices.test_device k must be in [0.1, 6]")
+
 
 
 CARRY_MODES = ("texting", "calling", "swinging", "pocket")
@@ -405,7 +307,7 @@ class PhoneImuConfig:
 @dataclass(frozen=True)
 class SimulateConfig:
     # seed of the numpy Generator behind every random draw (same config + seed -> identical tables).
-    seed: int = 7
+    seed: int = bounded(7, 0, 2**63 - 1)
     # floor plan
     venue: VenueConfig = field(default_factory=VenueConfig)
     # access points and radio propagation
@@ -422,10 +324,10 @@ class SimulateConfig:
     phone: PhoneImuConfig = field(default_factory=PhoneImuConfig)
 
     def validate(self) -> None:
-        if not 0 <= self.seed < 2**63:
-            raise ValueError("seed must be in [0, 2**63)")
+        check_ranges(self)
         for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices, self.phone):
             sub.validate()
+
 
 
 PRESETS = ("tiny", "default", "large", "corridor12")

@@ -3,25 +3,32 @@
 Layout (one directory per project; every table is Parquet)::
 
     WORKSPACE/
-      manifest.json            schema version, stages run, their configs and file checksums
-      data/                    ingest: walks, poses, wifi (with node), fixes, fingerprints, config.toml
-      truth/                   ground truth when the input had it (synthetic: true poses, APs, venue)
-      optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt, config.toml
+      manifest.json            the workspace marker: format "rmbuild-workspace", schema version, creation
+      data/                    ingest: walks, poses, wifi (with node), fixes, fingerprints, truth/
+      optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv)
       map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures
-      evaluate/                per-scan errors, CDF plot, config.toml
-      reports/<stage>.json     machine-readable summary of each stage's last run
+      evaluate/                per-scan errors, CDF plot
+      <stage dir>/report.json  the stage's machine-readable summary
+      <stage dir>/config.toml  the resolved config the stage ran with
+      <stage dir>/stage.json   the stage's record: completion time, version, sha256 of every file, and
+                               the records of the stages it read (to tell stale outputs)
+      report.html, report/     `rmbuild report` (HTML page and its PNGs)
+      view.rrd, <stage>.rrd    rerun recordings (`rmbuild view`, `--rerun`)
 
-Each stage writes its directory as a whole (:func:`rmbuild.io.atomic.replacing_dir`): a crash leaves the
-previous version or the new one. ``ingest`` creates the whole workspace the same way and refuses to
-replace an existing one without ``force``.
+Commit: each stage writes its directory in a temporary directory, report and record included, and one
+rename makes it the stage directory (:func:`rmbuild.io.atomic.replacing_dir`): a kill at any point leaves
+the previous version of the stage or the new one, each with its own matching report and checksums.
+``ingest`` creates the whole workspace the same way. Every file a stage reads is checked against the
+checksum its record holds. Commands hold the workspace lock (:mod:`rmbuild.io.lock`) while they run.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -32,10 +39,19 @@ import pandas as pd
 from rmbuild import __version__
 from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.io.atomic import clean_json, recover_dir, replacing_dir, write_json_atomic
+from rmbuild.io.lock import holds_lock, workspace_lock
 from rmbuild.types import Dataset, Fingerprints
 
-SCHEMA_VERSION = 1
+#: version of this layout; 1 kept the stage reports and checksums outside the stage directories
+SCHEMA_VERSION = 2
+#: the marker's "format": a manifest.json without it is not an rmbuild workspace
+WORKSPACE_FORMAT = "rmbuild-workspace"
 MANIFEST = "manifest.json"
+RECORD = "stage.json"
+REPORT = "report.json"
+CONFIG = "config.toml"
+#: a marker or record larger than this is not one of ours (never read a huge file to find out)
+MAX_MARKER_BYTES = 1 << 20
 
 #: stage -> its directory in the workspace
 STAGE_DIRS = {
@@ -46,6 +62,9 @@ STAGE_DIRS = {
 }
 #: the command that produces each stage's outputs (for error messages)
 STAGE_COMMANDS = {"ingest": "ingest", "optimize": "optimize", "map": "export-map", "evaluate": "evaluate"}
+#: the stages each stage reads (their records are noted in its own, to tell stale outputs)
+STAGE_INPUTS = {"ingest": (), "optimize": ("ingest",), "map": ("ingest", "optimize"),
+                "evaluate": ("ingest", "optimize", "map")}
 
 #: every artefact: key -> path relative to the workspace root
 ARTEFACTS: dict[str, str] = {
@@ -69,6 +88,7 @@ ARTEFACTS: dict[str, str] = {
     "optimize.walks": "optimize/walks.parquet",
     "optimize.history": "optimize/history.parquet",
     "optimize.tum_dir": "optimize/tum",
+    "optimize.tum_index": "optimize/tum/walks.csv",
     "optimize.anchors": "optimize/anchors.parquet",
     # map
     "map.cells": "map/radiomap.parquet",
@@ -82,7 +102,24 @@ ARTEFACTS: dict[str, str] = {
     "evaluate.errors": "evaluate/errors.parquet",
     "evaluate.tracks": "evaluate/tracks.parquet",
     "evaluate.cdf_png": "evaluate/cdf.png",
+    # outside the stage directories: `rmbuild report` and the rerun recordings
+    "report.html": "report.html",
+    "report.png_dir": "report",
+    "view.rrd": "view.rrd",
 }
+for _stage, _dir in STAGE_DIRS.items():
+    ARTEFACTS[f"{_dir}.report"] = f"{_dir}/{REPORT}"
+    ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
+    ARTEFACTS[f"{_stage}.rrd"] = f"{_stage}.rrd"
+
+#: walk ids become file names (optimize/tum/<name>.txt): at most this many characters before the suffix
+MAX_WALK_FILE_STEM = 64
+#: names Windows reserves whatever the extension (a workspace may be copied there)
+_RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)), *(f"lpt{i}" for i in range(1, 10))}
+
+
+def _sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
 
 
 def _sha256(path: Path) -> str:
@@ -97,11 +134,48 @@ def _now() -> str:
     return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def stage_of(key: str) -> str | None:
+    """The stage whose directory holds artefact ``key`` (None for files outside the stage directories)."""
+    rel = ARTEFACTS[key]
+    return next((s for s, d in STAGE_DIRS.items() if rel.startswith(d + "/")), None)
+
+
+def walk_file_names(walk_ids: Iterable[str]) -> dict[str, str]:
+    """A file stem for every walk id: unique (also ignoring case), at most :data:`MAX_WALK_FILE_STEM`
+    characters, only ``[A-Za-z0-9._-]``, never hidden (no leading "."), never a reserved device name.
+
+    An id that is already such a name keeps it; any other (``a/b``, ``.x``, a 300-character id, ids equal
+    but for case) gets a readable prefix and a hash of the id, so two ids never share a file.
+    """
+    ids = [str(w) for w in dict.fromkeys(walk_ids)]
+    base = {w: _safe_stem(w) for w in ids}
+    folded: dict[str, int] = {}
+    for w in ids:
+        folded[base[w].casefold()] = folded.get(base[w].casefold(), 0) + 1
+    out: dict[str, str] = {}
+    for w in ids:
+        b = base[w]
+        if b != w or folded[b.casefold()] > 1 or b.casefold().split(".")[0] in _RESERVED:
+            digest = hashlib.sha1(w.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+            b = f"{b[:MAX_WALK_FILE_STEM - 13]}-{digest}"
+        out[w] = b
+    if len({v.casefold() for v in out.values()}) != len(out):  # a 48-bit hash collision between two ids
+        raise WorkspaceError("two walk ids map to one file name; rename one of them")
+    return out
+
+
+def _safe_stem(walk_id: str) -> str:
+    s = "".join(c if (c.isascii() and c.isalnum()) or c in "-_." else "_" for c in walk_id)
+    s = s.lstrip(".")[:MAX_WALK_FILE_STEM]
+    return s or "walk"
+
+
 @dataclass
 class StageWriter:
     """Collects one stage's outputs in a temporary directory that becomes the stage directory on success.
 
     Keys are :data:`ARTEFACTS` keys of this stage; :meth:`path` gives a path for writers that need one.
+    ``report`` becomes ``report.json`` of the stage.
     """
 
     stage: str
@@ -127,19 +201,39 @@ class StageWriter:
         self.path(key).write_text(text)
 
     def figure(self, key: str, fig: Any, dpi: int = 110) -> None:
+        """Save a matplotlib figure and close it (pyplot keeps open figures alive)."""
+        import matplotlib.pyplot as plt
+
         fig.savefig(self.path(key), dpi=dpi, bbox_inches="tight")
+        plt.close(fig)
 
     def config(self, toml_text: str) -> None:
         """The resolved config of this run, written next to the outputs."""
-        self.stage_dir.mkdir(parents=True, exist_ok=True)
-        (self.stage_dir / "config.toml").write_text(toml_text)
+        self.path(f"{STAGE_DIRS[self.stage]}.config").write_text(toml_text)
+
+    def per_walk_texts(self, dir_key: str, index_key: str, texts: dict[str, str], suffix: str) -> None:
+        """One text file per walk in directory ``dir_key``, named by :func:`walk_file_names`; the table
+        ``index_key`` (walk_id, file) writes the mapping down."""
+        folder = self.path(dir_key)
+        folder.mkdir(parents=True, exist_ok=True)
+        names = walk_file_names(texts)
+        for wid, text in texts.items():
+            (folder / f"{names[wid]}{suffix}").write_text(text)
+        index = pd.DataFrame({"walk_id": list(names), "file": [f"{n}{suffix}" for n in names.values()]})
+        index.to_csv(self.path(index_key), index=False)
 
 
 class Workspace:
-    """An rmbuild workspace directory. Open an existing one with :meth:`open`; ingest creates one."""
+    """An rmbuild workspace directory. Open an existing one with :meth:`open`; ingest creates one.
+
+    Opening recovers an interrupted swap only when this process holds the workspace's lock
+    (:func:`rmbuild.io.lock.workspace_lock`); stages take the lock for their whole run.
+    """
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
+        self._records: dict[str, dict | None] = {}
+        self._verified: set[str] = set()
 
     # ------------------------------------------------------------------ creation and opening
     @staticmethod
@@ -148,60 +242,55 @@ class Workspace:
         """Create (or with ``force`` replace) a workspace holding the ingest stage, atomically.
 
         Refuses to replace an existing non-empty directory without ``force``, and never replaces a
-        directory that is not an rmbuild workspace.
+        directory that is not an rmbuild workspace (one whose manifest.json is rmbuild's marker).
         """
         root = Path(root)
-        recover_dir(root)
-        if root.exists():
-            if not root.is_dir():
-                raise WorkspaceError(f"{root} exists and is not a directory")
-            if any(root.iterdir()):
-                if not (root / MANIFEST).exists():
-                    raise WorkspaceError(
-                        f"{root} exists, is not empty and is not an rmbuild workspace; refusing to touch it"
-                    )
-                if not force:
-                    raise WorkspaceError(f"workspace {root} already exists; pass --force to replace it")
-        with replacing_dir(root) as tmp:
-            writer = StageWriter("ingest", tmp / STAGE_DIRS["ingest"])
-            yield writer
-            manifest = {
-                "schema_version": SCHEMA_VERSION,
-                "rmbuild_version": __version__,
-                "created_utc": _now(),
-                "stages": {},
-            }
-            _record_stage(tmp, manifest, writer)
-            write_json_atomic(tmp / MANIFEST, manifest)
+        with workspace_lock(root, "ingest"):
+            recover_dir(root)
+            check_replaceable(root, force)
+            with replacing_dir(root) as tmp:
+                writer = StageWriter("ingest", tmp / STAGE_DIRS["ingest"])
+                yield writer
+                _seal(writer, {})
+                marker = {"format": WORKSPACE_FORMAT, "schema_version": SCHEMA_VERSION,
+                          "rmbuild_version": __version__, "created_utc": _now()}
+                write_json_atomic(tmp / MANIFEST, marker)
 
     @classmethod
     def open(cls, root: str | Path) -> Workspace:
         root = Path(root)
-        recover_dir(root)
-        for d in STAGE_DIRS.values():
-            recover_dir(root / d)
-        if not (root / MANIFEST).is_file():
+        _recover(root)
+        marker = _read_marker(root)
+        if marker is None:
             raise WorkspaceError(
                 f"{root} is not an rmbuild workspace (no {MANIFEST}); create one with `rmbuild ingest`"
             )
-        ws = cls(root)
-        m = ws.manifest
-        if m.get("schema_version") != SCHEMA_VERSION:
+        if not _is_marker(marker):
+            raise WorkspaceError(f"{root / MANIFEST}: not an rmbuild workspace marker")
+        if marker.get("schema_version") != SCHEMA_VERSION:
             raise WorkspaceError(
-                f"{root / MANIFEST}: workspace schema version {m.get('schema_version')} is not "
-                f"{SCHEMA_VERSION}; re-run `rmbuild ingest --force`"
+                f"{root / MANIFEST}: workspace schema version {marker.get('schema_version')} is not "
+                f"{SCHEMA_VERSION} (written by an older rmbuild); re-run `rmbuild ingest --force`"
             )
-        return ws
+        return cls(root)
 
     @property
     def manifest(self) -> dict[str, Any]:
-        try:
-            return json.loads((self.root / MANIFEST).read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            raise WorkspaceError(f"{self.root / MANIFEST}: unreadable manifest ({e})") from None
+        """The workspace marker (format, schema version, creation)."""
+        m = _read_marker(self.root)
+        if m is None:
+            raise WorkspaceError(f"{self.root / MANIFEST}: missing or unreadable")
+        return m
+
+    # ------------------------------------------------------------------ stage records
+    def record(self, stage: str) -> dict | None:
+        """The record of ``stage`` (its stage.json: completion, version, checksums), None when absent."""
+        if stage not in self._records:
+            self._records[stage] = _read_record(self.root / STAGE_DIRS[stage] / RECORD, stage)
+        return self._records[stage]
 
     def has(self, stage: str) -> bool:
-        return stage in self.manifest.get("stages", {}) and (self.root / STAGE_DIRS[stage]).is_dir()
+        return self.record(stage) is not None
 
     def require(self, stage: str) -> None:
         """Raise WorkspaceError naming the command to run when ``stage`` has no outputs here."""
@@ -210,6 +299,21 @@ class Workspace:
                 f"workspace {self.root} has no {stage} outputs; run `rmbuild {STAGE_COMMANDS[stage]} "
                 f"-w {self.root}` first"
             )
+
+    def stale_inputs(self, stage: str) -> list[str]:
+        """The stages ``stage`` read that have been re-run (or removed) since: its outputs are stale."""
+        rec = self.record(stage)
+        if rec is None:
+            return []
+        now = self._input_digests(stage)
+        return [s for s, d in (rec.get("inputs") or {}).items() if now.get(s) != d]
+
+    def _input_digests(self, stage: str) -> dict[str, str | None]:
+        out: dict[str, str | None] = {}
+        for s in STAGE_INPUTS[stage]:
+            p = self.root / STAGE_DIRS[s] / RECORD
+            out[s] = _sha256(p) if p.is_file() else None
+        return out
 
     def check_can_write(self, stage: str, force: bool) -> None:
         """Refuse to replace ``stage``'s existing outputs unless ``force``."""
@@ -226,49 +330,97 @@ class Workspace:
         return self.path(key).exists()
 
     def report_path(self, stage: str) -> Path:
-        return self.root / "reports" / f"{stage}.json"
+        return self.path(f"{STAGE_DIRS[stage]}.report")
 
     # ------------------------------------------------------------------ writing a stage
     @contextlib.contextmanager
     def writing(self, stage: str) -> Iterator[StageWriter]:
-        """Write ``stage``'s directory as a whole; the report and manifest are updated afterwards."""
+        """Write ``stage``'s directory as a whole, its report and record included, in one commit."""
         if stage == "ingest":
             raise ValueError("ingest creates the workspace: use Workspace.create")
-        target = self.root / STAGE_DIRS[stage]
-        with replacing_dir(target) as tmp_dir:
-            writer = StageWriter(stage, tmp_dir)
-            yield writer
-        writer.stage_dir = target
-        manifest = self.manifest
-        _record_stage(self.root, manifest, writer)
-        write_json_atomic(self.root / MANIFEST, manifest)
+        with workspace_lock(self.root, STAGE_COMMANDS[stage]):
+            inputs = self._input_digests(stage)
+            with replacing_dir(self.root / STAGE_DIRS[stage]) as tmp_dir:
+                writer = StageWriter(stage, tmp_dir)
+                yield writer
+                _seal(writer, inputs)
+            self._records.pop(stage, None)
+            self._verified = {v for v in self._verified if not v.startswith(STAGE_DIRS[stage] + "/")}
 
-    # ------------------------------------------------------------------ reading
-    def read_table(self, key: str) -> pd.DataFrame:
+    # ------------------------------------------------------------------ reading (checksums verified)
+    def read_bytes(self, key: str) -> bytes:
+        """The bytes of artefact ``key``, checked against its stage's record."""
         p = self.path(key)
-        try:
-            return pd.read_parquet(p)
-        except FileNotFoundError:
-            stage = next(s for s, d in STAGE_DIRS.items() if ARTEFACTS[key].startswith(d + "/"))
+        stage = stage_of(key)
+        if stage is not None:
             self.require(stage)
-            raise WorkspaceError(
-                f"{p}: missing from the workspace; re-run `rmbuild {STAGE_COMMANDS[stage]}`"
-            ) from None
+        try:
+            data = p.read_bytes()
+        except FileNotFoundError:
+            cmd = STAGE_COMMANDS.get(stage or "", "")
+            raise WorkspaceError(f"{p}: missing from the workspace" + (f"; re-run `rmbuild {cmd} --force`"
+                                                                        if cmd else "")) from None
+        except OSError as e:
+            raise WorkspaceError(f"{p}: unreadable ({e.strerror})") from None
+        if stage is not None:
+            self._verify(stage, ARTEFACTS[key], data)
+        return data
+
+    def _verify(self, stage: str, rel: str, data: bytes) -> None:
+        if rel in self._verified:
+            return
+        files = (self.record(stage) or {}).get("files", {})
+        want = files.get(rel)
+        cmd = STAGE_COMMANDS[stage]
+        if want is None:
+            raise WorkspaceError(f"{self.root / rel}: not among the files `rmbuild {cmd}` wrote (see "
+                                 f"{STAGE_DIRS[stage]}/{RECORD}); re-run `rmbuild {cmd} --force`")
+        if _sha256_bytes(data) != want:
+            raise WorkspaceError(f"{self.root / rel}: checksum mismatch: the file changed after `rmbuild {cmd}` "
+                                 f"wrote it; re-run `rmbuild {cmd} --force`")
+        self._verified.add(rel)
+
+    def verify(self, stage: str) -> list[str]:
+        """Problems of ``stage``'s directory against its record (missing, changed or extra files)."""
+        rec = self.record(stage)
+        if rec is None:
+            return [f"{stage}: no record"]
+        d = self.root / STAGE_DIRS[stage]
+        files = rec.get("files", {})
+        problems = [f"{rel}: missing" for rel in files if not (self.root / rel).is_file()]
+        problems += [f"{rel}: checksum mismatch" for rel, h in files.items()
+                     if (self.root / rel).is_file() and _sha256(self.root / rel) != h]
+        present = {str(p.relative_to(self.root)) for p in d.rglob("*") if p.is_file() and p != d / RECORD}
+        problems += [f"{rel}: not in the record" for rel in sorted(present - set(files))]
+        return problems
+
+    def read_table(self, key: str) -> pd.DataFrame:
+        data = self.read_bytes(key)
+        try:
+            return pd.read_parquet(io.BytesIO(data))
         except Exception as e:  # pyarrow raises several types for corrupt files
-            raise WorkspaceError(f"{p}: unreadable Parquet ({type(e).__name__}: {e})") from None
+            raise WorkspaceError(f"{self.path(key)}: unreadable Parquet ({type(e).__name__}: {e})") from None
 
     def read_json(self, key: str) -> Any:
-        p = self.path(key)
         try:
-            return json.loads(p.read_text())
-        except FileNotFoundError:
-            raise WorkspaceError(f"{p}: missing from the workspace") from None
-        except json.JSONDecodeError as e:
-            raise WorkspaceError(f"{p}: invalid JSON ({e})") from None
+            return json.loads(self.read_bytes(key))
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise WorkspaceError(f"{self.path(key)}: invalid JSON ({e})") from None
+
+    def read_text(self, key: str) -> str:
+        try:
+            return self.read_bytes(key).decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise WorkspaceError(f"{self.path(key)}: not UTF-8 text ({e.reason})") from None
 
     def read_report(self, stage: str) -> dict | None:
-        p = self.report_path(stage)
-        return json.loads(p.read_text()) if p.is_file() else None
+        """The stage's report (None when the stage has not run)."""
+        return self.read_json(f"{STAGE_DIRS[stage]}.report") if self.has(stage) else None
+
+    def read_config_text(self, stage: str) -> str | None:
+        """The resolved config the stage ran with, as TOML text (None when absent)."""
+        key = f"{STAGE_DIRS[stage]}.config"
+        return self.read_text(key) if self.has(stage) and self.exists(key) else None
 
     def read_dataset(self) -> Dataset:
         self.require("ingest")
@@ -296,22 +448,84 @@ class Workspace:
         return Fingerprints.from_long(self.read_table("data.fingerprints"))
 
 
-def _record_stage(root: Path, manifest: dict, writer: StageWriter) -> None:
-    """Write the stage's report and record its files with checksums in ``manifest``."""
+def _recover(root: Path) -> None:
+    """Undo swaps interrupted by a kill (see :func:`rmbuild.io.atomic.recover_dir`), which needs the
+    exclusive lock: under this process' exclusive lock, or by taking it for a moment when nobody holds it."""
+
+    def recover() -> None:
+        recover_dir(root)
+        for d in STAGE_DIRS.values():
+            recover_dir(root / d)
+
+    if holds_lock(root, exclusive=True):
+        recover()
+    elif not holds_lock(root, exclusive=False) and root.parent.is_dir():
+        try:
+            with workspace_lock(root, "open"):
+                recover()
+        except WorkspaceError:  # busy (its holder recovers), or no lock can be created here
+            pass
+
+
+def _read_marker(root: Path) -> dict | None:
+    """The parsed manifest.json of ``root`` (None when absent, unreadable, huge or not a JSON object)."""
+    p = root / MANIFEST
+    try:
+        if not p.is_file() or p.stat().st_size > MAX_MARKER_BYTES:
+            return None
+        m = json.loads(p.read_bytes())
+    except (OSError, ValueError):
+        return None
+    return m if isinstance(m, dict) else None
+
+
+def _is_marker(m: dict | None) -> bool:
+    """rmbuild's workspace marker, this layout's or the first one (schema 1, no "format" key)."""
+    if m is None:
+        return False
+    if m.get("format") == WORKSPACE_FORMAT:
+        return True
+    return m.get("schema_version") == 1 and "rmbuild_version" in m and isinstance(m.get("stages"), dict)
+
+
+def check_replaceable(root: Path, force: bool) -> None:
+    """Refuse to (re)create a workspace at ``root`` over a non-empty directory that is not an rmbuild
+    workspace (whatever ``force`` says), or over an existing workspace without ``force``."""
+    if not root.exists():
+        return
+    if not root.is_dir():
+        raise WorkspaceError(f"{root} exists and is not a directory")
+    if not any(root.iterdir()):
+        return
+    if not _is_marker(_read_marker(root)):
+        raise WorkspaceError(f"{root} exists, is not empty and is not an rmbuild workspace (no rmbuild "
+                             f"{MANIFEST}); refusing to replace it, with or without --force")
+    if not force:
+        raise WorkspaceError(f"workspace {root} already exists; pass --force to replace it")
+
+
+def _read_record(p: Path, stage: str) -> dict | None:
+    try:
+        if not p.is_file() or p.stat().st_size > 64 * MAX_MARKER_BYTES:
+            return None
+        rec = json.loads(p.read_bytes())
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(rec, dict) and rec.get("stage") == stage and isinstance(rec.get("files"), dict)
+    return rec if ok else None
+
+
+def _seal(writer: StageWriter, inputs: dict[str, str | None]) -> None:
+    """Write the stage's report and its record (sha256 of every file) into the stage directory."""
+    write_json_atomic(writer.path(f"{STAGE_DIRS[writer.stage]}.report"), clean_json(writer.report))
+    d = writer.stage_dir
     files = {}
-    if writer.stage_dir.is_dir():
-        for p in sorted(writer.stage_dir.rglob("*")):
-            if p.is_file():
-                rel = Path(STAGE_DIRS[writer.stage]) / p.relative_to(writer.stage_dir)
-                files[str(rel)] = _sha256(p)
-    report_rel = f"reports/{writer.stage}.json"
-    write_json_atomic(root / report_rel, clean_json(writer.report))
-    manifest.setdefault("stages", {})[writer.stage] = {
-        "completed_utc": _now(),
-        "rmbuild_version": __version__,
-        "report": report_rel,
-        "files": files,
-    }
+    for p in sorted(d.rglob("*")):
+        if p.is_file() and p != d / RECORD:
+            files[str(Path(STAGE_DIRS[writer.stage]) / p.relative_to(d))] = _sha256(p)
+    record = {"stage": writer.stage, "completed_utc": _now(), "rmbuild_version": __version__,
+              "schema_version": SCHEMA_VERSION, "inputs": inputs, "files": files}
+    write_json_atomic(d / RECORD, record)
 
 
 def write_dataset(writer: StageWriter, ds: Dataset, fp: Fingerprints) -> None:
@@ -331,6 +545,16 @@ def write_dataset(writer: StageWriter, ds: Dataset, fp: Fingerprints) -> None:
         key = f"data.truth_{name}"
         if key in ARTEFACTS:
             writer.table(key, df)
+
+
+def check_output_file(path: str | Path, force: bool, what: str = "output") -> Path:
+    """Refuse to replace an existing file (a report, a recording) without ``force``; returns the path."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{what} {p} is a directory")
+    if p.exists() and not force:
+        raise InputError(f"{what} {p} already exists; pass --force to replace it")
+    return p
 
 
 def check_output_dir(path: Path, force: bool) -> None:

@@ -1,11 +1,16 @@
-"""Helpers shared by the stages: the progress protocol and timing."""
+"""Helpers shared by the stages: the progress protocol, timing and the locked workspace."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Protocol
+
+from rmbuild.errors import WorkspaceError
+from rmbuild.io.lock import workspace_lock
+from rmbuild.io.workspace import Workspace
 
 
 class Progress(Protocol):
@@ -48,3 +53,13 @@ def timed(times: dict[str, float], key: str) -> Iterator[None]:
 
 
 ProgressCallback = Callable[[str, dict], None]
+
+
+@contextmanager
+def locked_workspace(root: str | Path, command: str, exclusive: bool = True) -> Iterator[Workspace]:
+    """The workspace at ``root``, opened under its lock (exclusive for commands that write) for the block."""
+    if not Path(root).is_dir():
+        raise WorkspaceError(f"{root} is not an rmbuild workspace (no such directory); create one with "
+                             "`rmbuild ingest`")
+    with workspace_lock(root, command, exclusive):
+        yield Workspace.open(root)

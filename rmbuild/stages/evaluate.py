@@ -8,27 +8,44 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rmbuild.config import EvaluateConfig, MapConfig, to_toml
+from rmbuild.config import EvaluateConfig, MapConfig, load_stage_config_text, to_toml
 from rmbuild.io.workspace import Workspace
-from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions
+from rmbuild.stages.view import log_workspace
+from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 
 def run(
     workspace: str | Path,
     cfg: EvaluateConfig,
-    map_cfg: MapConfig,
+    map_cfg: MapConfig | None = None,
     test_walks: list[str] | None = None,
     progress: Progress | None = None,
     force: bool = False,
-    viewer=None,
+    viewer: Viewer | None = None,
 ) -> tuple[dict, str]:
-    """Evaluate; returns (the evaluate report, a short text table)."""
+    """Evaluate; returns (the evaluate report, a short text table). ``map_cfg`` None: the config export-map
+    ran with (the defaults when it has not run)."""
+    with locked_workspace(workspace, "evaluate") as ws:
+        if map_cfg is None:
+            map_cfg = map_config_of(ws)
+        return _run(ws, cfg, map_cfg, test_walks, ensure_progress(progress), force, ensure_viewer(viewer))
+
+
+def map_config_of(ws: Workspace) -> MapConfig:
+    """The [map] config export-map ran with in ``ws`` (defaults when it has not run)."""
+    text = ws.read_config_text("map")
+    if text is None:
+        return MapConfig()
+    return load_stage_config_text("map", text, str(ws.path("map.config")))
+
+
+def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: list[str] | None, progress: Progress,
+         force: bool, viewer: Viewer) -> tuple[dict, str]:
     from rmbuild.evaluate.localization import evaluate
 
-    progress = ensure_progress(progress)
     t0 = time.perf_counter()
-    ws = Workspace.open(workspace)
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
     xy, info = built_positions(ws, ds, map_cfg)
@@ -70,8 +87,5 @@ def run(
         w.figure("evaluate.cdf_png", res.cdf_figure())
         w.config(to_toml(cfg, "evaluate") + "\n" + to_toml(map_cfg, "map"))
         w.report = report
-    if viewer is not None:
-        from rmbuild.stages.view import log_workspace
-
-        log_workspace(ws, viewer)
+    log_workspace(ws, viewer)
     return report, res.table()

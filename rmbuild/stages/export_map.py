@@ -8,10 +8,12 @@ from pathlib import Path
 import pandas as pd
 
 from rmbuild.config import MapConfig, to_toml
-from rmbuild.io.anchors import read_anchors
+from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
-from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
+from rmbuild.stages.view import log_workspace
+from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 
 def run(
@@ -20,14 +22,18 @@ def run(
     anchors_path: str | Path | None = None,
     progress: Progress | None = None,
     force: bool = False,
-    viewer=None,
+    viewer: Viewer | None = None,
 ) -> dict:
     """Build the radio map from the optimised poses; returns the export-map report."""
+    with locked_workspace(workspace, "export-map") as ws:
+        return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer))
+
+
+def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
+         viewer: Viewer) -> dict:
     from rmbuild.radiomap import build_radio_map
 
-    progress = ensure_progress(progress)
     t0 = time.perf_counter()
-    ws = Workspace.open(workspace)
     ds = ws.read_dataset()
     xy, info = built_positions(ws, ds, cfg)
     ws.check_can_write("map", force)
@@ -37,7 +43,9 @@ def run(
         if info["gauge"] == "anchors":
             info["anchors_note"] = "optimize already placed the walks with anchors; --anchors ignored"
         else:
-            xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), read_anchors(anchors_path))
+            anchors = read_anchors(anchors_path)
+            check_anchors(anchors, ds)
+            xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), anchors)
             info.update(extra)
     progress.phase("rasterising")
     rm = build_radio_map(ds.wifi, xy, ds.poses["walk_id"].astype(str).to_numpy(), cfg, frame=info["frame"])
@@ -78,8 +86,5 @@ def run(
             "time_s": {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)},
         }
         w.report = report
-    if viewer is not None:
-        from rmbuild.stages.view import log_workspace
-
-        log_workspace(ws, viewer)
+    log_workspace(ws, viewer)
     return report

@@ -7,10 +7,15 @@ import time
 from pathlib import Path
 
 from rmbuild.config import IngestConfig, PdrConfig, to_toml
+from rmbuild.errors import InputError
+from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
 from rmbuild.io.formats import choose_reader, expand_inputs
-from rmbuild.io.workspace import Workspace, write_dataset
+from rmbuild.io.lock import workspace_lock
+from rmbuild.io.workspace import Workspace, check_replaceable, write_dataset
 from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.view import log_workspace
+from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
 
@@ -23,18 +28,38 @@ def run(
     force: bool = False,
     progress: Progress | None = None,
     pdr_cfg: PdrConfig | None = None,
-    viewer=None,
+    viewer: Viewer | None = None,
 ) -> dict:
     """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report.
 
     ``pdr_cfg``: options of the raw-IMU formats (phone PDR, ILC/IPIN specifics); defaults when None.
     """
-    progress = ensure_progress(progress)
-    t0 = time.perf_counter()
-    files = expand_inputs(inputs)
+    files = _input_files(inputs, workspace)
+    Path(workspace).resolve().parent.mkdir(parents=True, exist_ok=True)  # the lock lives beside the workspace
+    with workspace_lock(workspace, "ingest"):
+        check_replaceable(Path(workspace), force)
+        return _run(inputs, files, workspace, cfg, fmt, force, ensure_progress(progress), pdr_cfg or PdrConfig(),
+                    ensure_viewer(viewer))
+
+
+def _input_files(inputs: list[str | Path], workspace: str | Path) -> list[Path]:
+    """The input files; an input inside the workspace (which ingest replaces) is an error, and the files of
+    a workspace that lies inside an input directory are not inputs."""
     ws_root = Path(workspace).resolve()
-    files = [f for f in files if ws_root not in f.resolve().parents]
-    pdr_cfg = pdr_cfg or PdrConfig()
+    for p in inputs:
+        rp = Path(p).resolve()
+        if rp == ws_root or ws_root in rp.parents:
+            raise InputError(f"input lies inside the workspace {workspace}, which ingest replaces; move it out "
+                             "or choose another -w", str(p))
+    files = [f for f in expand_inputs(inputs) if ws_root not in f.resolve().parents]
+    if not files:
+        raise InputError("no input files found outside the workspace", ", ".join(map(str, inputs)))
+    return files
+
+
+def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg: IngestConfig, fmt: str | None,
+         force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer) -> dict:
+    t0 = time.perf_counter()
     reader = choose_reader(files, fmt, pdr_cfg)
     progress.phase(f"reading {len(files)} file(s) as {reader.name}")
     raw = reader.read(files, cfg)
@@ -42,6 +67,7 @@ def run(
     progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
     ds, fp, summary = build_dataset(raw, cfg, source=reader.name, pdr_cfg=pdr_cfg)
+    summary["warnings"].extend(evidence_warnings(ds))
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
     progress.phase("writing workspace")
@@ -54,8 +80,5 @@ def run(
         w.report = summary
     for msg in summary["warnings"]:
         log.warning(msg)
-    if viewer is not None:
-        from rmbuild.stages.view import log_workspace
-
-        log_workspace(Workspace.open(workspace), viewer)
+    log_workspace(Workspace.open(workspace), viewer)
     return summary

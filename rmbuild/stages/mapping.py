@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
 from rmbuild.config import MapConfig
-from rmbuild.errors import InputError
+from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.evaluate.trajectory import align_se2, interpolate_xy
+from rmbuild.io.anchors import Anchors
 from rmbuild.io.workspace import Workspace
 from rmbuild.types import Dataset
 
@@ -17,6 +19,9 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     The frame is "building" when optimize used anchors, otherwise the reference walk's own frame.
     """
     ws.require("optimize")
+    if ws.stale_inputs("optimize"):
+        raise WorkspaceError(f"{ws.path('optimize.poses')}: optimize ran on an earlier ingest of this workspace; "
+                             "re-run `rmbuild optimize --force`")
     poses = ws.read_table("optimize.poses")
     if len(poses) != ds.n_nodes or not (poses["walk_id"].to_numpy() == ds.poses["walk_id"].to_numpy()).all():
         raise InputError(f"{ws.path('optimize.poses')}: does not match the ingested poses; re-run `rmbuild optimize`")
@@ -37,20 +42,20 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     return xy, info
 
 
-def place_with_anchors(xy: np.ndarray, ds: Dataset, optimized_poses, anchors) -> tuple[np.ndarray, dict]:
-    """One SE(2) from the optimised positions at the anchors' times to the anchors (>= 2 anchors)."""
-    src, dst = [], []
-    for wid, g in anchors.groupby("walk_id", sort=False):
-        if str(wid) not in set(ds.poses["walk_id"].astype(str)):
-            raise InputError(f"anchors: unknown walk {wid!r}")
-        p = interpolate_xy(optimized_poses, str(wid), g["t_s"].to_numpy(float))
-        if not np.isfinite(p).all():
-            raise InputError(f"anchors: a time of walk {wid!r} lies outside the walk's time span")
-        src.append(p)
-        dst.append(g[["x_m", "y_m"]].to_numpy(float))
-    src_a, dst_a = np.vstack(src), np.vstack(dst)
+def place_with_anchors(xy: np.ndarray, ds: Dataset, optimized_poses: pd.DataFrame,
+                       anchors: Anchors) -> tuple[np.ndarray, dict]:
+    """One SE(2) from the optimised positions at the anchors' times to the anchors (>= 2 anchors, checked
+    by :func:`rmbuild.io.anchors.check_anchors`)."""
+    tab = anchors.table
+    src_a = np.full((len(tab), 2), np.nan)
+    for wid, rows in tab.groupby("walk_id", sort=False).indices.items():
+        src_a[rows] = interpolate_xy(optimized_poses, str(wid), tab["t_s"].to_numpy(float)[rows])
+    dst_a = tab[["x_m", "y_m"]].to_numpy(float)
     if len(src_a) < 2:
-        raise InputError("anchors: placing a map in the building frame needs at least 2 anchors")
+        raise InputError("placing a map in the building frame needs at least 2 anchors", anchors.where(0))
+    if not np.isfinite(src_a).all():
+        raise InputError("an anchored walk has no optimised position at the anchor's time; re-run "
+                         "`rmbuild optimize`", anchors.where(int(np.argmax(~np.isfinite(src_a).all(axis=1)))))
     r, t = align_se2(src_a, dst_a)
     res = np.hypot(*(src_a @ r.T + t - dst_a).T)
     return xy @ r.T + t, {"frame": "building", "anchor_fit": {

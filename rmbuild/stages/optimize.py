@@ -7,15 +7,18 @@ import math
 import resource
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from rmbuild.config import OptimizeConfig, to_toml
 from rmbuild.evaluate.trajectory import trajectory_metrics
-from rmbuild.io.anchors import read_anchors
+from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
-from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
+from rmbuild.stages.view import log_workspace
+from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
 
@@ -30,45 +33,48 @@ def tum_text(poses: pd.DataFrame) -> str:
     return "".join(" ".join(f"{v:.6f}" for v in r) + "\n" for r in rows)
 
 
-def _safe_name(walk_id: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in walk_id) or "walk"
-
-
 def run(
     workspace: str | Path,
     cfg: OptimizeConfig,
     anchors_path: str | Path | None = None,
     progress: Progress | None = None,
     force: bool = False,
-    viewer=None,
+    viewer: Viewer | None = None,
 ) -> dict:
     """Run the SLAM back end on the workspace's walks; returns the optimize report."""
+    with locked_workspace(workspace, "optimize") as ws:
+        return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer))
+
+
+def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
+         viewer: Viewer) -> dict:
     from rmbuild.slam import optimize
 
-    progress = ensure_progress(progress)
     t0 = time.perf_counter()
-    ws = Workspace.open(workspace)
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
-    anchors = read_anchors(anchors_path) if anchors_path is not None else None
+    anchors = None
+    if anchors_path is not None:
+        anchors = read_anchors(anchors_path)
+        check_anchors(anchors, ds, cfg.solve.anchor_max_gap_s)
     ws.check_can_write("optimize", force)
-    state = {"phase": None}
+    state: dict[str, Any] = {"phase": None, "iter": 0}
 
     def on_progress(phase: str, info: dict) -> None:
         if phase != state["phase"]:
             state["phase"] = phase
             progress.phase(phase, info.get("total"))
-        if phase == "solve" and "cost_after" in info and viewer is not None:
-            state["iter"] = state.get("iter", 0) + 1
-            viewer.log_cost(state["iter"], float(info["cost_after"]))
         if phase == "solve" and "cost_after" in info:
+            state["iter"] += 1
+            viewer.log_cost(state["iter"], float(info["cost_after"]))
             progress.message(f"outer {info.get('outer')} iteration {info.get('iteration')}: "
                              f"cost {info['cost_after']:.4g}")
         elif "done" in info:
             progress.advance(0)
 
-    result = optimize(ds, fp, cfg, anchors=anchors, progress=on_progress)
-    gauge = "anchors" if anchors is not None and len(anchors) else "se2"
+    anchor_table = anchors.table if anchors is not None else None
+    result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress)
+    gauge = "anchors" if anchor_table is not None and len(anchor_table) else "se2"
     t_metrics = time.perf_counter()
     raw = trajectory_metrics(ds.poses, ds, align=True)
     # the optimised walks' alignment is fitted on the linked walks: an unlinked walk's frame is arbitrary
@@ -99,19 +105,14 @@ def run(
         w.table("optimize.walks", result.walks)
         w.table("optimize.history", pd.DataFrame({"iteration": np.arange(len(result.cost_history)),
                                                   "cost": result.cost_history}))
-        tum = w.path("optimize.tum_dir")
-        tum.mkdir(parents=True, exist_ok=True)
-        for wid, g in result.poses.groupby("walk_id", sort=False):
-            (tum / f"{_safe_name(str(wid))}.txt").write_text(tum_text(g))
-        if anchors is not None:
-            w.table("optimize.anchors", anchors)
+        w.per_walk_texts("optimize.tum_dir", "optimize.tum_index",
+                         {str(wid): tum_text(g) for wid, g in result.poses.groupby("walk_id", sort=False)}, ".txt")
+        if anchor_table is not None:
+            w.table("optimize.anchors", anchor_table)
         w.config(to_toml(cfg, "optimize"))
         report["time_s"]["stage_total"] = round(time.perf_counter() - t0, 3)
         w.report = report
-    if viewer is not None:
-        from rmbuild.stages.view import log_workspace
-
-        log_workspace(ws, viewer)
+    log_workspace(ws, viewer)
     return report
 
 

@@ -7,23 +7,33 @@ import os
 import time
 from pathlib import Path
 
+from rmbuild.errors import InputError
 from rmbuild.io.atomic import write_bytes_atomic, write_text_atomic
-from rmbuild.io.workspace import Workspace
+from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.stages.common import locked_workspace
 
 log = logging.getLogger(__name__)
 
 
 def run(workspace: str | Path, out: str | Path | None = None, png_dir: str | Path | None = None,
-        heatmap_top_n: int = 6) -> dict:
+        heatmap_top_n: int = 6, force: bool = False) -> dict:
     """Write the report to ``out`` (default WORKSPACE/report.html) atomically and each figure as a PNG in
-    ``png_dir`` (default WORKSPACE/report/); returns {"path", "png_dir", "figures", "missing", "time_s"}."""
+    ``png_dir`` (default WORKSPACE/report/); returns {"path", "png_dir", "figures", "missing", "time_s"}.
+
+    An existing report (the HTML file, or PNGs in ``png_dir``) is replaced only with ``force``."""
+    with locked_workspace(workspace, "report", exclusive=False) as ws:
+        out_p = check_output_file(out if out is not None else ws.path("report.html"), force, "report")
+        png_p = Path(png_dir) if png_dir is not None else ws.path("report.png_dir")
+        if not force and png_p.is_dir() and any(png_p.glob("*.png")):
+            raise InputError(f"{png_p} already holds report figures; pass --force to replace them")
+        return _write(ws, out_p, png_p, heatmap_top_n)
+
+
+def _write(ws: Workspace, out: Path, png_dir: Path, heatmap_top_n: int) -> dict:
     from rmbuild.viz.report import build_report
 
     t0 = time.perf_counter()
-    ws = Workspace.open(workspace)
     report = build_report(ws, heatmap_top_n=heatmap_top_n)
-    out = Path(out) if out is not None else ws.root / "report.html"
-    png_dir = Path(png_dir) if png_dir is not None else ws.root / "report"
     for f in report.figures:
         write_bytes_atomic(png_dir / f"{f.name}.png", f.png)
         _readable(png_dir / f"{f.name}.png")

@@ -13,19 +13,23 @@ from pathlib import Path
 import numpy as np
 
 from rmbuild.io.workspace import Workspace
-from rmbuild.stages.common import Progress, ensure_progress
-from rmbuild.viz import NullViewer, Viewer, ViewTarget, open_viewer
+from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
+from rmbuild.viz import Viewer, ViewTarget, open_viewer
 from rmbuild.viz.align import frame_to_truth
 
 log = logging.getLogger(__name__)
 
 
-def log_workspace(ws: Workspace, viewer: Viewer | NullViewer, progress: Progress | None = None) -> dict:
-    """Log every stage ``ws`` holds to ``viewer``; returns {"logged": [...], "skipped": {...}, "time_s"}."""
+def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = None) -> dict:
+    """Log every stage ``ws`` holds to ``viewer``; returns {"logged": [...], "skipped": {...}, "time_s"}.
+
+    With a disabled viewer (:class:`rmbuild.viz.viewer.NullViewer`) nothing is read."""
     progress = ensure_progress(progress)
     logged: list[str] = []
     skipped: dict[str, str] = {}
     times: dict[str, float] = {}
+    if not viewer.enabled:
+        return {"logged": logged, "skipped": {"all": "viewing is off"}, "time_s": times}
 
     def step(name: str) -> float:
         progress.phase(name)
@@ -90,25 +94,25 @@ def log_workspace(ws: Workspace, viewer: Viewer | NullViewer, progress: Progress
     return {"logged": logged, "skipped": skipped, "time_s": {k: round(v, 4) for k, v in times.items()}}
 
 
-def run(workspace: str | Path, target: ViewTarget | None = None, viewer: Viewer | NullViewer | None = None,
+def run(workspace: str | Path, target: ViewTarget | None = None, viewer: Viewer | None = None,
         progress: Progress | None = None) -> dict:
     """Log ``workspace`` to ``viewer`` (left open: the caller closes it, e.g. a served viewer that must stay
     up) or else to a new viewer for ``target`` (closed at the end: the .rrd is complete on return).
     Returns a summary: what was logged and skipped, where, counts, timings."""
     t0 = time.perf_counter()
-    ws = Workspace.open(workspace)
-    ws.require("ingest")
-    if viewer is None:
-        if target is None:
-            raise ValueError("view.run needs a target or a viewer")
-        with open_viewer(target, recording_name=f"rmbuild {Path(workspace).name}") as v:
-            summary = log_workspace(ws, v, progress)
-            counts = dict(getattr(v, "counts", {}))
-    else:
-        summary = log_workspace(ws, viewer, progress)
-        viewer.flush()
-        counts = dict(getattr(viewer, "counts", {}))
-        target = getattr(viewer, "target", target)
+    with locked_workspace(workspace, "view", exclusive=False) as ws:
+        ws.require("ingest")
+        if viewer is None:
+            if target is None:
+                raise ValueError("view.run needs a target or a viewer")
+            with open_viewer(target, recording_name=f"rmbuild {Path(workspace).name}") as v:
+                summary = log_workspace(ws, v, progress)
+                counts = dict(v.counts)
+        else:
+            summary = log_workspace(ws, viewer, progress)
+            viewer.flush()
+            counts = dict(viewer.counts)
+            target = viewer.target or target
     summary.update({
         "stage": "view",
         "mode": target.mode if target is not None else None,

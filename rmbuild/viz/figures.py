@@ -29,7 +29,7 @@ def _walls(ax, walls: np.ndarray | None) -> None:
         return
     from matplotlib.collections import LineCollection
 
-    ax.add_collection(LineCollection(walls.reshape(-1, 2, 2), colors="0.35", linewidths=1.2, zorder=1))
+    ax.add_collection(LineCollection(list(walls.reshape(-1, 2, 2)), colors="0.35", linewidths=1.2, zorder=1))
 
 
 def _paths(ax, poses: pd.DataFrame, order: dict[str, int], **kw) -> None:

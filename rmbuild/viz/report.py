@@ -3,7 +3,7 @@
 :func:`build_report` reads what the workspace holds (any stage may be missing) and returns the page and
 its figures in memory; :func:`rmbuild.stages.report.run` writes them. Figures: walks before/after the
 optimisation over the floor plan, heat maps of the strongest APs, CDFs of every localizer and map, the
-optimiser's cost; tables: key figures (reports/*.json) and the config each stage ran with.
+optimiser's cost; tables: key figures (each stage's report.json) and the config each stage ran with.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import html
 import io
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -21,13 +22,13 @@ import numpy as np
 import pandas as pd
 
 from rmbuild import __version__
-from rmbuild.io.workspace import STAGE_DIRS, Workspace
+from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.viz import figures
 from rmbuild.viz.align import apply, frame_to_truth, per_walk_to_truth
 
 log = logging.getLogger(__name__)
 
-#: (stage, dotted key in reports/<stage>.json, label) shown in the key-figures table when present
+#: (stage, dotted key in the stage's report.json, label) shown in the key-figures table when present
 KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("ingest", "walks", "walks"),
     ("ingest", "poses", "poses (steps)"),
@@ -125,7 +126,7 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _table(rows: list[tuple[str, ...]], header: tuple[str, ...]) -> str:
+def _table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...]) -> str:
     h = "".join(f"<th>{html.escape(c)}</th>" for c in header)
     body = "".join(
         "<tr>" + "".join(
@@ -160,18 +161,28 @@ def _errors_by_label(df: pd.DataFrame) -> dict[str, np.ndarray]:
 def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
     """Read ``ws`` and lay out the report; stages that have not run leave a note instead of a section."""
     ws.require("ingest")
-    figs: list[ReportFigure] = []
     missing: dict[str, str] = {}
-    sections: list[str] = []
     reports = {s: ws.read_report(s) for s in STAGE_DIRS}
+    for s in STAGE_DIRS:
+        if stale := ws.stale_inputs(s):
+            missing[f"{s} (stale)"] = (f"{STAGE_COMMANDS[s]} ran on an earlier run of {', '.join(stale)}: its "
+                                       f"figures may not match; re-run `rmbuild {STAGE_COMMANDS[s]} --force`")
     ds = ws.read_dataset()
-    walls = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
-    walls = walls if len(walls) else None
-    walk_ids = ds.walk_ids()
-
-    # ---------------------------------------------------------------- walks
-    opt = ws.read_table("optimize.poses") if ws.has("optimize") else None
+    wall_xy = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
+    walls = wall_xy if len(wall_xy) else None
     gauge = (reports.get("optimize") or {}).get("gauge")
+    figs, rt = _walk_figures(ws, ds, gauge, walls, missing)
+    figs += _map_figures(ws, heatmap_top_n, gauge, rt, walls, missing)
+    eval_figs, eval_rows = _evaluation(ws, reports.get("evaluate"), missing)
+    page = _page(ws, figs + eval_figs, missing, eval_rows, reports)
+    return Report(page, figs + eval_figs, missing)
+
+
+def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray | None,
+                  missing: dict[str, str]) -> tuple[list[ReportFigure], Any]:
+    """The walks before/after the optimisation and the optimiser's cost; also the optimiser-to-truth
+    transform (None when unknown)."""
+    opt = ws.read_table("optimize.poses") if ws.has("optimize") else None
     rt = frame_to_truth(opt, ds.truth_poses, gauge) if opt is not None else None
     panels: list[tuple[str, pd.DataFrame]] = []
     raw_aligned = per_walk_to_truth(ds.poses, ds.truth_poses)
@@ -191,102 +202,112 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
     plan_frame_ok = ds.truth_poses is not None or gauge == "anchors"
-    fig = figures.walks_figure(panels, walk_ids, truth=ds.truth_poses,
+    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses,
                                walls=walls if (plan_frame_ok or opt is None) else None)
-    figs.append(ReportFigure("walks", "Walks before and after optimisation", _png(fig),
-                             "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan."))
+    figs = [ReportFigure("walks", "Walks before and after optimisation", _png(fig),
+                         "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan.")]
     if ws.has("optimize") and ws.exists("optimize.history"):
         h = ws.read_table("optimize.history")
         if "cost" in h and len(h):
             figs.append(ReportFigure("cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy())),
                                      "Cost after each Levenberg-Marquardt iteration (all outer loops)."))
+    return figs, rt
 
-    # ---------------------------------------------------------------- radio map
-    if ws.has("map") and ws.exists("map.cells"):
-        cells = ws.read_table("map.cells")
-        sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
-        cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
-        walls_map = None
-        if walls is not None:
-            if gauge == "anchors" or rt is None:
-                walls_map = walls if gauge == "anchors" else None
-            else:  # walls into the map (optimiser) frame: map = R^T (building - t)
-                r, t = rt
-                pts = (walls.reshape(-1, 2) - t) @ r
-                walls_map = pts.reshape(-1, 4)
-        fig = figures.heatmaps_figure(cells, heatmap_top_n, walls_map, cell_size)
-        if fig is not None:
-            figs.append(ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig),
-                                     "Mean RSSI per cell (dBm) in the map frame; empty cells were never visited."))
-        else:
-            missing["map"] = "the radio map table has no usable rows"
-    else:
+
+def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, walls: np.ndarray | None,
+                 missing: dict[str, str]) -> list[ReportFigure]:
+    if not (ws.has("map") and ws.exists("map.cells")):
         missing["map"] = "export-map has not run"
+        return []
+    cells = ws.read_table("map.cells")
+    sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
+    cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
+    walls_map = None
+    if walls is not None:
+        if gauge == "anchors" or rt is None:
+            walls_map = walls if gauge == "anchors" else None
+        else:  # walls into the map (optimiser) frame: map = R^T (building - t)
+            r, t = rt
+            walls_map = ((walls.reshape(-1, 2) - t) @ r).reshape(-1, 4)
+    fig = figures.heatmaps_figure(cells, heatmap_top_n, walls_map, cell_size)
+    if fig is None:
+        missing["map"] = "the radio map table has no usable rows"
+        return []
+    return [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig),
+                         "Mean RSSI per cell (dBm) in the map frame; empty cells were never visited.")]
 
-    # ---------------------------------------------------------------- evaluation
-    ev = reports.get("evaluate")
-    eval_rows: list[tuple[str, ...]] = []
-    if ws.has("evaluate"):
-        if ws.exists("evaluate.errors"):
-            errs = _errors_by_label(ws.read_table("evaluate.errors"))
-            if errs:
-                figs.append(ReportFigure("cdf", "Localization error CDFs", _png(figures.cdf_figure(errs)),
-                                         "Per test scan, error of each localizer with each map "
-                                         "(built: from the optimised walks; surveyed: from true positions; "
-                                         "raw: from raw PDR)."))
-        maps = (ev or {}).get("maps") or {}
-        for mname, locs in maps.items():
-            for lname, st in (locs or {}).items():
-                st = st or {}
-                eval_rows.append((str(mname), str(lname), *(_fmt(st.get(k)) for k in ("mean", "median", "p90", "n"))))
-    else:
+
+def _evaluation(ws: Workspace, ev: dict | None, missing: dict[str, str]
+                ) -> tuple[list[ReportFigure], list[tuple[str, ...]]]:
+    """The CDF figure and the per map and localizer error rows."""
+    if not ws.has("evaluate"):
         missing["evaluate"] = "evaluate has not run"
+        return [], []
+    figs = []
+    if ws.exists("evaluate.errors"):
+        errs = _errors_by_label(ws.read_table("evaluate.errors"))
+        if errs:
+            figs.append(ReportFigure("cdf", "Localization error CDFs", _png(figures.cdf_figure(errs)),
+                                     "Per test scan, error of each localizer with each map "
+                                     "(built: from the optimised walks; surveyed: from true positions; "
+                                     "raw: from raw PDR)."))
+    rows: list[tuple[str, ...]] = []
+    for mname, locs in ((ev or {}).get("maps") or {}).items():
+        for lname, st in (locs or {}).items():
+            st = st or {}
+            rows.append((str(mname), str(lname), *(_fmt(st.get(k)) for k in ("mean", "median", "p90", "n"))))
+    return figs, rows
 
-    # ---------------------------------------------------------------- tables
-    key_rows = []
-    for stage, key, label in KEY_FIGURES:
-        v = _get(reports.get(stage), key)
-        if v is not None:
-            key_rows.append((label, _fmt(v), f"{stage}: {key}"))
+
+def _fig_html(f: ReportFigure) -> str:
+    uri = "data:image/png;base64," + base64.b64encode(f.png).decode("ascii")
+    return (f"<figure id=\"fig-{f.name}\"><img src=\"{uri}\" alt=\"{html.escape(f.title)}\">"
+            f"<figcaption>{html.escape(f.title)}. {html.escape(f.caption)}</figcaption></figure>")
+
+
+def _tables_html(ws: Workspace, reports: dict[str, dict | None]) -> tuple[str, str]:
+    """The key figures (with every report folded out below) and the config each stage ran with."""
+    key_rows = [(label, _fmt(v), f"{stage}: {key}") for stage, key, label in KEY_FIGURES
+                if (v := _get(reports.get(stage), key)) is not None]
     details = []
     for stage, rep in reports.items():
         if rep is None:
             continue
         flat = [(k, _fmt(v)) for k, v in _flatten(rep).items() if k]
-        details.append(f"<details><summary>reports/{html.escape(stage)}.json ({len(flat)} values)</summary>"
+        rel = ARTEFACTS[f"{STAGE_DIRS[stage]}.report"]
+        details.append(f"<details><summary>{html.escape(rel)} ({len(flat)} values)</summary>"
                        f"{_table(flat, ('key', 'value'))}</details>")
     configs = []
     for stage, d in STAGE_DIRS.items():
-        p = ws.root / d / "config.toml"
-        if p.is_file():
-            configs.append(f"<h3>{html.escape(stage)} <span class=\"meta\">({html.escape(d)}/config.toml)</span></h3>"
-                           f"<pre>{html.escape(p.read_text())}</pre>")
+        text = ws.read_config_text(stage)
+        if text is not None:
+            rel = ARTEFACTS[f"{d}.config"]
+            configs.append(f"<h3>{html.escape(stage)} <span class=\"meta\">({html.escape(rel)})</span></h3>"
+                           f"<pre>{html.escape(text)}</pre>")
+    keys = "<h2>Key figures</h2>" + (_table(key_rows, ("figure", "value", "source")) if key_rows
+                                     else "<p class=\"missing\">no stage reports</p>") + "".join(details)
+    return keys, "<h2>Configuration used</h2>" + ("".join(configs) or "<p class=\"missing\">none found</p>")
 
-    # ---------------------------------------------------------------- page
-    def fig_html(f: ReportFigure) -> str:
-        uri = "data:image/png;base64," + base64.b64encode(f.png).decode("ascii")
-        return (f"<figure id=\"fig-{f.name}\"><img src=\"{uri}\" alt=\"{html.escape(f.title)}\">"
-                f"<figcaption>{html.escape(f.title)}. {html.escape(f.caption)}</figcaption></figure>")
 
+def _page(ws: Workspace, figs: list[ReportFigure], missing: dict[str, str], eval_rows: list[tuple[str, ...]],
+          reports: dict[str, dict | None]) -> str:
     by_name = {f.name: f for f in figs}
-    sections.append("<h2>Walks</h2>" + fig_html(by_name["walks"]) + (fig_html(by_name["cost"]) if "cost" in by_name
-                                                                    else ""))
-    sections.append("<h2>Radio map</h2>" + (fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
+    sections = ["<h2>Walks</h2>" + _fig_html(by_name["walks"]) + (_fig_html(by_name["cost"]) if "cost" in by_name
+                                                                   else "")]
+    sections.append("<h2>Radio map</h2>" + (_fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
                                             else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>"))
     ev_html = "<h2>Localization</h2>"
     if "cdf" in by_name:
-        ev_html += fig_html(by_name["cdf"])
+        ev_html += _fig_html(by_name["cdf"])
     if eval_rows:
         ev_html += _table(eval_rows, ("map", "localizer", "mean (m)", "median (m)", "p90 (m)", "scans"))
     if "cdf" not in by_name and not eval_rows:
         ev_html += f"<p class=\"missing\">{html.escape(missing.get('evaluate', 'no evaluation results'))}</p>"
     sections.append(ev_html)
-    sections.append("<h2>Key figures</h2>" + (_table(key_rows, ("figure", "value", "source")) if key_rows
-                                              else "<p class=\"missing\">no stage reports</p>") + "".join(details))
-    sections.append("<h2>Configuration used</h2>" + ("".join(configs) or "<p class=\"missing\">none found</p>"))
+    sections.extend(_tables_html(ws, reports))
     stages_run = [s for s in STAGE_DIRS if ws.has(s)]
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-    page = (
+    return (
         "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
         f"<title>rmbuild report: {html.escape(ws.root.name)}</title>"
         f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style></head><body>"
@@ -297,4 +318,3 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
         + f"<script type=\"application/json\" id=\"rmbuild-missing\">{html.escape(json.dumps(missing))}</script>"
         "</body></html>\n"
     )
-    return Report(page, figs, missing)

@@ -1,7 +1,7 @@
-"""The only module of rmbuild that imports rerun: a :class:`Viewer` that logs rmbuild's tables, and a
-:class:`NullViewer` with the same methods that does nothing (so stages never test whether one exists).
+"""The only module of rmbuild that imports rerun: :class:`RerunViewer`, the rerun implementation of the
+:class:`rmbuild.viz.viewer.Viewer` contract (its do-nothing twin is :class:`rmbuild.viz.viewer.NullViewer`).
 
-rerun-sdk is imported lazily (inside :class:`Viewer`), so importing this module costs nothing. The SDK's
+rerun-sdk is imported lazily (inside :class:`RerunViewer`), so importing this module costs nothing. The SDK's
 API moves between releases: rmbuild pins rerun-sdk to one minor (:data:`RERUN_VERSION`) and checks it.
 
 Entity tree (``floor`` and ``raw`` carry a static y-flip so that +y points up in the 2D views)::
@@ -11,7 +11,7 @@ Entity tree (``floor`` and ``raw`` carry a static y-flip so that +y points up in
     floor/optimized/<walk>, .../pos       optimised path in the common frame
     floor/initial/<walk>                  initial guess of the optimiser
     (floor/{optimized,initial,vicinity,map} carry the optimiser-frame -> building-frame transform when
-    the truth is known and the gauge is free: see Viewer.log_alignment)
+    the truth is known and the gauge is free: see RerunViewer.log_alignment)
     floor/vicinity                        vicinity factors (a sample), coloured by final error
     floor/map/coverage                    scans per cell; floor/map/strongest/<ap>: RGBA heat maps
     floor/eval/<map>/<localizer>/<walk>/{estimated,true,error}   localization tracks (timeline "scan")
@@ -28,10 +28,11 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,15 @@ import pandas as pd
 
 from rmbuild.errors import RmbuildError
 from rmbuild.viz.colors import colormap, error_colors, walk_color
+from rmbuild.viz.viewer import (
+    ALIGNED_PARTS,
+    MAX_TENSOR_APS,
+    MAX_VICINITY_LINES,
+    STRONGEST_APS,
+    NullViewer,
+    Viewer,
+    ViewTarget,
+)
 
 log = logging.getLogger(__name__)
 
@@ -62,52 +72,6 @@ FLOOR = "floor"
 RAW = "raw"
 PLOTS = "plots"
 MAP = "map"
-
-#: default caps (keep recordings small and quick to log)
-MAX_VICINITY_LINES = 3000
-MAX_TENSOR_APS = 256
-STRONGEST_APS = 6
-
-
-class NullViewer:
-    """Stands in when viewing is off: every logging method accepts the same arguments and does nothing."""
-
-    enabled = False
-
-    def __enter__(self) -> NullViewer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("log_") or name in ("set_walks", "flush"):
-            return _noop
-        raise AttributeError(name)
-
-    def close(self) -> Path | None:
-        return None
-
-
-def _noop(*args: Any, **kwargs: Any) -> None:
-    return None
-
-
-@dataclass(frozen=True)
-class ViewTarget:
-    """Where a recording goes: ``mode`` "save" (``path`` is the .rrd), "spawn" (native viewer on rerun's
-    default port) or "serve" (web viewer on localhost: ``port`` for the web page, gRPC on ``port`` + 1)."""
-
-    mode: str
-    path: Path | None = None
-    port: int = 9090
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("save", "spawn", "serve"):
-            raise ValueError(f"unknown view mode {self.mode!r}")
-        if self.mode == "save" and self.path is None:
-            raise ValueError("save needs a path")
-
 
 def has_display() -> bool:
     """True when a native window can be opened (X11/Wayland on Linux; always on macOS and Windows)."""
@@ -240,7 +204,7 @@ def blueprint(rrb: Any, has: dict[str, bool]) -> Any:
 
 
 # ------------------------------------------------------------------ the viewer
-class Viewer:
+class RerunViewer:
     """Logs rmbuild's in-memory tables to one rerun recording (a file, a spawned viewer or a web viewer).
 
     All ``log_*`` methods take the workspace tables (see docs/data-format.md) and tolerate missing
@@ -264,8 +228,10 @@ class Viewer:
         self.rec = self.rr.RecordingStream(APPLICATION_ID, make_default=False)
         if target.mode == "save":
             assert target.path is not None
-            target.path.parent.mkdir(parents=True, exist_ok=True)
-            self._tmp_path = target.path.with_name(f".{target.path.name}.{os.getpid()}.tmp")
+            # recorded outside the target's directory (ingest replaces the workspace that will hold it)
+            fd, tmp = tempfile.mkstemp(prefix="rmbuild-", suffix=".rrd")
+            os.close(fd)
+            self._tmp_path = Path(tmp)
             self.rec.save(self._tmp_path)
         elif target.mode == "spawn":
             with _env(XDG_CONFIG_HOME=str(_private_rerun_config()), TELEMETRY_ENABLED="false"):
@@ -282,7 +248,7 @@ class Viewer:
         self._send_blueprint()
 
     # -------------------------------------------------------------- lifecycle
-    def __enter__(self) -> Viewer:
+    def __enter__(self) -> RerunViewer:
         return self
 
     def __exit__(self, exc_type: object, *exc: object) -> None:
@@ -303,7 +269,7 @@ class Viewer:
         self.rec.disconnect()  # closes the file sink
         assert self._tmp_path is not None and self.target.path is not None
         if keep:
-            os.replace(self._tmp_path, self.target.path)
+            _move_into_place(self._tmp_path, self.target.path)
             return self.target.path
         self._tmp_path.unlink(missing_ok=True)
         return None
@@ -375,8 +341,8 @@ class Viewer:
                      static=True)
         self._count("walls", len(strips))
 
-    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float],
-                      parts: Sequence[str] = ("optimized", "initial", "vicinity", "map")) -> None:
+    def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
+                      parts: Sequence[str] = ALIGNED_PARTS) -> None:
         """Place the optimiser's frame in the building frame: ``building = R(theta) @ map + t``.
 
         Logged as a static transform on ``floor/<part>`` (the data under it stays in its own frame), so the
@@ -663,6 +629,23 @@ class Viewer:
                      static=True)
 
 
+def _move_into_place(src: Path, dst: Path) -> None:
+    """Move ``src`` to ``dst`` so that ``dst`` is never half written (copy beside it, then rename)."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.replace(src, dst)
+        return
+    except OSError:  # another file system
+        pass
+    part = dst.with_name(f".{dst.name}.{os.getpid()}.part")
+    try:
+        shutil.copyfile(src, part)
+        os.replace(part, dst)
+    finally:
+        part.unlink(missing_ok=True)
+        src.unlink(missing_ok=True)
+
+
 def _find_xy(df: pd.DataFrame, x_names: Sequence[str]) -> tuple[str, str] | None:
     for x in x_names:
         y = x.replace("x", "y", 1)
@@ -682,12 +665,12 @@ def _infer_cell_size(cells: pd.DataFrame) -> float:
     return 1.0
 
 
-def open_viewer(target: ViewTarget | None, recording_name: str | None = None) -> Viewer | NullViewer:
-    """A :class:`Viewer` for ``target``, or a :class:`NullViewer` when ``target`` is None."""
+def open_viewer(target: ViewTarget | None, recording_name: str | None = None) -> Viewer:
+    """A :class:`RerunViewer` for ``target``, or a :class:`NullViewer` when ``target`` is None."""
     if target is None:
         return NullViewer()
     t0 = time.perf_counter()
-    v = Viewer(target, recording_name)
+    v = RerunViewer(target, recording_name)
     log.debug("rerun viewer (%s) ready in %.2f s", target.mode, time.perf_counter() - t0)
     return v
 

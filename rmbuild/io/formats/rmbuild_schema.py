@@ -7,9 +7,15 @@ Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``fixes*`` (``.
 
 from __future__ import annotations
 
+import csv
 import difflib
 import gzip
+import io
 import json
+import math
+import os
+import re
+import warnings
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -18,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
-from rmbuild.errors import InputError
+from rmbuild.errors import InputError, one_line
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals
 
@@ -73,6 +79,20 @@ def _table_of(p: Path) -> str | None:
     return None
 
 
+#: columns; no table of the schema (nor a truth table) has more than a dozen
+MAX_COLUMNS = 1000
+#: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
+NUMERIC_NA = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "null", "NULL", "None", "<NA>"]
+
+
+def _common_dir(files: list[Path]) -> str:
+    """The directory holding all ``files`` (for errors about the set of inputs)."""
+    try:
+        return os.path.commonpath([str(f.parent) for f in files]) if files else "(no input files)"
+    except ValueError:  # relative and absolute paths mixed
+        return str(files[0].parent)
+
+
 class _Located:
     """A table read from one file with a way to name its rows: 'file:line' (CSV) or 'file:row N'."""
 
@@ -80,47 +100,192 @@ class _Located:
         self.path = path
         self.df = df
         self.csv = _suffix(path) != ".parquet"
+        self._lines: list[int] | None = None
 
     def where(self, i: int) -> str:
-        return f"{self.path}:{i + 2}" if self.csv else f"{self.path}:row {i + 1}"
+        if not self.csv:
+            return f"{self.path}:row {i + 1}"
+        if self._lines is None:  # only when an error is reported: find the line each record starts on
+            self._lines = _record_lines(self.path)
+        return f"{self.path}:{self._lines[i]}" if 0 <= i < len(self._lines) else f"{self.path}:record {i + 1}"
 
 
-def _read_file(path: Path) -> pd.DataFrame:
+def _open_text(path: Path) -> io.TextIOBase:
+    raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
+    return io.TextIOWrapper(raw, encoding="utf-8", errors="replace", newline="")
+
+
+def _record_lines(path: Path) -> list[int]:
+    """The physical line on which each data record of a CSV file starts (blank lines skipped like pandas;
+    quoted fields may span lines)."""
+    out: list[int] = []
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))  # a cell may be as long as the file
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        line = 1
+        header = True
+        for row in reader:
+            if row and not header:
+                out.append(line)
+            header = header and not row
+            line = reader.line_num + 1
+    return out
+
+
+def _bad_utf8_line(path: Path) -> str:
+    """'line N' of the first line that is not UTF-8 ('' when it cannot be told)."""
+    try:
+        raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
+        with raw:
+            for n, line in enumerate(raw, 1):
+                try:
+                    line.decode("utf-8")
+                except UnicodeDecodeError as e:
+                    return f"{n}: byte {e.start + 1} of the line"
+    except (OSError, EOFError, zlib.error):
+        pass
+    return ""
+
+
+def _check_width(path: Path) -> None:
+    """The header has at most :data:`MAX_COLUMNS` columns and the first data row no more fields than the
+    header (pandas would parse every field of a longer first row into a column before complaining)."""
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        header = next((row for row in reader if row), None)
+        if header is None:
+            return
+        if len(header) > MAX_COLUMNS:
+            raise InputError(f"{len(header):,} columns: at most {MAX_COLUMNS}", f"{path}:{reader.line_num}")
+        line = reader.line_num + 1
+        for row in reader:
+            if row:
+                if len(row) > len(header):
+                    raise InputError(f"{len(row)} fields, the header has {len(header)}", f"{path}:{line}")
+                return
+            line = reader.line_num + 1
+
+
+def _long_record(path: Path) -> tuple[str, str]:
+    """(problem, where) of the first record with more fields than the header."""
+    csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
+    with _open_text(path) as fh:
+        reader = csv.reader(fh, skipinitialspace=True)
+        width, line = None, 1
+        for row in reader:
+            if row and width is None:
+                width = len(row)
+            elif row and width is not None and len(row) > width:
+                return f"{len(row)} fields, the header has {width}", f"{path}:{line}"
+            line = reader.line_num + 1
+    return "more fields than the header", str(path)
+
+
+def read_located(path: Path, required: dict[str, str] | None = None,
+                 optional: dict[str, str] | None = None) -> _Located:
+    """Read one table file; string columns of the schema stay text ("00001", "NA"), numeric ones are numbers."""
+    return _Located(path, _read_file(path, {**(required or {}), **(optional or {})}))
+
+
+def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame:
     try:
         if _suffix(path) == ".parquet":
             return pd.read_parquet(path)
-        return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""])
+        _check_width(path)
+        with warnings.catch_warnings():
+            # a first data row longer than the header: pandas would make an index of it, or drop cells
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            if schema is None:
+                return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""],
+                                   index_col=False)
+            strs = [c for c, k in schema.items() if k == "str"]
+            return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
+                               na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+    except InputError:
+        raise
+    except pd.errors.ParserWarning:
+        raise InputError(*_long_record(path)) from None
     except pd.errors.EmptyDataError:
         raise InputError("empty file (no header)", str(path)) from None
     except pd.errors.ParserError as e:
-        raise InputError(f"malformed CSV ({str(e).splitlines()[0]})", str(path)) from None
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(e))
+        if m:
+            raise InputError(f"{m.group(3)} fields, the header has {m.group(1)}", f"{path}:{m.group(2)}") from None
+        raise InputError(f"malformed CSV ({one_line(str(e))})", str(path)) from None
     except (gzip.BadGzipFile, EOFError, zlib.error, OSError) as e:
         kind = "gzip" if str(path).endswith(".gz") else "file"
         raise InputError(f"unreadable {kind} ({type(e).__name__}: {e})", str(path)) from None
     except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", str(path)) from None
+        line = _bad_utf8_line(path)
+        where = f"{path}:{line.split(':')[0]}" if line else str(path)
+        what = f" ({line.split(': ', 1)[1]})" if line else ""
+        raise InputError(f"not UTF-8 text{what}: {e.reason}", where) from None
+    except MemoryError:
+        raise InputError("file too large to read into memory", str(path)) from None
     except Exception as e:  # pyarrow raises ArrowInvalid and friends for corrupt Parquet
         raise InputError(f"unreadable Parquet ({type(e).__name__}: {e})", str(path)) from None
 
 
-def _check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
+def _as_stored(df: pd.DataFrame) -> pd.DataFrame:
+    """A table kept as given (truth tables): columns of mixed or oversized values (e.g. an integer beyond
+    64 bits) become text, so that the workspace can store them."""
+    for c in df.columns:
+        if df[c].dtype == object:
+            df[c] = df[c].map(lambda v: v if isinstance(v, str) or v is None else str(v))
+    return df
+
+
+def check_columns(loc: _Located, required: dict[str, str], optional: dict[str, str]) -> None:
     cols = [str(c) for c in loc.df.columns]
     known = list(required) + list(optional)
     for c in cols:
         if c not in known:
             near = difflib.get_close_matches(c, known, n=1)
             hint = f"; did you mean {near[0]!r}?" if near else f" (known: {', '.join(known)})"
-            raise InputError(f"unknown column {c!r}{hint}", str(loc.path))
+            raise InputError(f"unknown column {c[:80]!r}{hint}", f"{loc.path}:1" if loc.csv else str(loc.path))
     for c in required:
         if c not in cols:
             near = difflib.get_close_matches(c, cols, n=1)
-            hint = f" (found {near[0]!r}: misspelt?)" if near else f" (found: {', '.join(cols) or 'none'})"
-            raise InputError(f"missing required column {c!r}{hint}", str(loc.path))
+            hint = f" (found {near[0]!r}: misspelt?)" if near else f" (found: {', '.join(cols)[:200] or 'none'})"
+            raise InputError(f"missing required column {c!r}{hint}", f"{loc.path}:1" if loc.csv else str(loc.path))
     if len(loc.df) == 0:
         raise InputError("no data rows", str(loc.path))
 
 
-def _coerce(loc: _Located, columns: dict[str, str]) -> None:
+def _numbers(s: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+    """A column as float64 and a mask of the cells that are not numbers; integers beyond the float range
+    (a 400-digit cell) become +-inf, missing values NaN."""
+    if pd.api.types.is_numeric_dtype(s) and not pd.api.types.is_bool_dtype(s):
+        try:
+            return s.to_numpy(dtype=np.float64), np.zeros(len(s), bool)
+        except OverflowError:
+            pass
+    else:
+        try:
+            num = pd.to_numeric(s, errors="coerce")
+            return num.to_numpy(dtype=np.float64), (num.isna() & s.notna()).to_numpy()
+        except (OverflowError, ValueError, TypeError):
+            pass
+    pairs = [_one_number(v) for v in s]
+    return np.array([p[0] for p in pairs], dtype=np.float64), np.array([p[1] for p in pairs], dtype=bool)
+
+
+def _one_number(v: object) -> tuple[float, bool]:
+    """(value, not a number) of one cell."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return math.nan, False
+    if isinstance(v, bool):
+        return math.nan, True
+    try:
+        return float(v), False  # type: ignore[arg-type]
+    except OverflowError:  # an int beyond the float range
+        return (math.inf if v > 0 else -math.inf), False  # type: ignore[operator]
+    except (ValueError, TypeError):
+        return math.nan, True
+
+
+def coerce(loc: _Located, columns: dict[str, str]) -> None:
     """Check types and finiteness column by column; convert in place."""
     df = loc.df
     for c, kind in columns.items():
@@ -128,20 +293,17 @@ def _coerce(loc: _Located, columns: dict[str, str]) -> None:
             continue
         s = df[c]
         if kind == "str":
-            bad = s.isna().to_numpy()
+            # Parquet may hold None; ids given as numbers in a typed file become their text ("1")
+            text = s.where(~s.isna(), "").astype(str)
+            bad = (text.str.strip() == "").to_numpy()
             if c in ("walk_id", "bssid") and bad.any():
                 raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
-            # ids read by pandas as numbers ("1") become strings; floats like 1.0 keep their text form
-            df[c] = s.where(~s.isna(), "").astype(str)
+            df[c] = text
             continue
-        if not pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
-            num = pd.to_numeric(s, errors="coerce")
-            bad = (num.isna() & s.notna()).to_numpy()
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise InputError(f"column {c}: not a number: {s.iloc[i]!r}", loc.where(i))
-            s = num
-        v = s.to_numpy(dtype=np.float64)
+        v, bad = _numbers(s)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"column {c}: not a number: {str(s.iloc[i])[:60]!r}", loc.where(i))
         nan = np.isnan(v)
         if nan.any() and c not in NULLABLE:
             raise InputError(f"column {c}: empty or NaN value", loc.where(int(np.argmax(nan))))
@@ -240,21 +402,22 @@ class RmbuildSchemaReader(Reader):
                 skipped += 1
                 continue
             by_table.setdefault(t, []).append(f)
+        inputs = _common_dir(files)
         if "wifi" not in by_table:
-            raise InputError("no wifi file among the inputs (expected a file named wifi*.csv or .parquet)")
+            raise InputError("no wifi file among the inputs (expected a file named wifi*.csv or .parquet)", inputs)
         if "poses" not in by_table and "imu" not in by_table:
             raise InputError("no poses file among the inputs (expected poses*.csv or .parquet, or raw phone "
-                             "IMU in imu*.csv or .parquet)")
+                             "IMU in imu*.csv or .parquet)", inputs)
         where: dict[str, Callable[[int], str]] = {}
 
         # poses: absolute or increments, one mode per file
         parts = []
         for f in by_table.get("poses", []):
-            loc = _Located(f, _read_file(f))
+            loc = read_located(f, {**POSE_ABS, **POSE_INC, **POSE_OPT})
             cols = set(map(str, loc.df.columns))
             mode = POSE_INC if ("step_length_m" in cols or "dheading_rad" in cols) else POSE_ABS
-            _check_columns(loc, mode, POSE_OPT)
-            _coerce(loc, {**mode, **POSE_OPT})
+            check_columns(loc, mode, POSE_OPT)
+            coerce(loc, {**mode, **POSE_OPT})
             if mode is POSE_INC:
                 loc.df = _integrate_increments(loc.df)
             parts.append(loc)
@@ -271,9 +434,9 @@ class RmbuildSchemaReader(Reader):
             req, opt = SCHEMAS[t]
             parts = []
             for f in by_table[t]:
-                loc = _Located(f, _read_file(f))
-                _check_columns(loc, req, opt)
-                _coerce(loc, {**req, **opt})
+                loc = read_located(f, req, opt)
+                check_columns(loc, req, opt)
+                coerce(loc, {**req, **opt})
                 parts.append(loc)
             tables[t], where[t] = _concat(parts)
 
@@ -311,7 +474,7 @@ class RmbuildSchemaReader(Reader):
                     raise InputError(f"invalid JSON ({e})", str(fs[0])) from None
             elif t.startswith("truth/") and t != "truth/poses":
                 name = t.removeprefix("truth/")
-                df = pd.concat([_read_file(f) for f in fs], ignore_index=True)
+                df = pd.concat([_as_stored(_read_file(f)) for f in fs], ignore_index=True)
                 if name == "aps":
                     raw.truth_aps = df
                 else:

@@ -1,0 +1,161 @@
+"""Plausibility checks of ingested evidence that are warnings, not errors (called by `rmbuild ingest`).
+
+- A walk duplicated under another id (same steps, or same scans relative to its start): it would count
+  twice as evidence and link perfectly to its copy.
+- A walk much shorter than a vicinity link needs.
+- A walk whose readings are offset from the other walks' at the same places (a device offset, e.g. a
+  phone reading 10 dB stronger): co-located scans are found without positions, by the strongest AP they
+  hear and the agreement of their readings after removing a constant, and the walk's median difference to
+  the other walks is its offset. rmbuild's vicinity factors compare raw RSS, so such a walk links poorly;
+  the ``slac`` localizer calibrates devices (RSS = k·φ + b; He, Chan, Yu and Liu, "Calibration-Free
+  Fusion of Step Counter and Wireless Fingerprints for Indoor Localization", UbiComp 2015) only when
+  localizing.
+
+Pure: takes a :class:`Dataset`, returns the warnings.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.types import Dataset
+
+#: steps; a walk with fewer poses is too short to link by Wi-Fi (one scan every ~2-4 s, ~2 steps/s)
+MIN_WALK_STEPS = 5
+#: dB; a walk whose readings are at least this much above or below the others' at the same places is
+#: reported (on the MS ILC floors site1/F1 and site2/F4 the walks' estimated offsets are within ±6 dB,
+#: 90 % within ±3.5 dB: docs/reliability.md)
+OFFSET_WARN_DB = 6.0
+#: scans compared for the device-offset check need this many APs in common
+MIN_SHARED_APS = 5
+#: dB; two scans are taken as co-located when their readings agree within this (median absolute deviation
+#: of the differences after removing their median): a few metres apart in a typical building
+COLOCATED_MAD_DB = 4.0
+#: co-located scan pairs a walk needs before its offset is estimated
+MIN_PAIRS = 10
+#: scans kept per strongest-AP group (spread over the walks): bounds the work to ~O(groups x 40^2)
+MAX_GROUP_SCANS = 40
+#: groups (strongest APs) examined, largest first
+MAX_GROUPS = 300
+
+
+def evidence_warnings(ds: Dataset) -> list[str]:
+    """Warnings about duplicated walks, very short walks and device offsets (empty when all is plausible)."""
+    return duplicate_walks(ds) + short_walks(ds) + [
+        f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
+        "vicinity factors compare raw RSS, so it may stay unlinked; the slac localizer calibrates devices "
+        "when localizing"
+        for w, off in walk_rss_offsets(ds).items() if abs(off) >= OFFSET_WARN_DB
+    ]
+
+
+def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series) -> pd.Series:
+    """Per walk, an order-independent digest of its rows (times relative to the walk's first pose,
+    values rounded): equal digests mean equal rows."""
+    rel = df[cols].copy()  # the walk id itself is not hashed: a copy has another one
+    rel["t_s"] = np.round(rel["t_s"].to_numpy(float) - t0.reindex(df["walk_id"]).to_numpy(float), 3)
+    for c in cols:
+        if c != "t_s" and pd.api.types.is_float_dtype(rel[c]):
+            rel[c] = np.round(rel[c].to_numpy(float), 3)
+    h = pd.util.hash_pandas_object(rel, index=False).to_numpy()
+    g = pd.Series(h, index=df["walk_id"].to_numpy()).groupby(level=0, sort=False)
+    # sum and xor of 64-bit row hashes, and the row count: a multiset digest
+    return g.sum().astype(str) + ":" + g.agg(lambda x: np.bitwise_xor.reduce(x.to_numpy())).astype(str) + ":" + \
+        g.size().astype(str)
+
+
+def duplicate_walks(ds: Dataset) -> list[str]:
+    """Walks whose steps (relative times and own-frame poses) or scans (relative times, BSSIDs, RSSI)
+    repeat another walk's."""
+    t0 = ds.poses.groupby("walk_id", sort=False)["t_s"].first()
+    n = ds.poses.groupby("walk_id", sort=False).size()
+    digests = {"steps": _walk_digests(ds.poses[n.reindex(ds.poses["walk_id"]).to_numpy() >= 2],
+                                      ["t_s", "x_m", "y_m", "heading_rad"], t0),
+               "scans": _walk_digests(ds.wifi, ["t_s", "bssid", "rssi_dbm"], t0)}
+    out: list[str] = []
+    reported: set[str] = set()
+    for what, d in digests.items():
+        first: dict[str, str] = {}
+        for wid, key in d.items():
+            other = first.setdefault(key, str(wid))
+            if other != str(wid) and str(wid) not in reported:
+                reported.add(str(wid))
+                out.append(f"walk {str(wid)!r} repeats the {what} of walk {other!r} (a copy under another id?); "
+                           "it counts twice as evidence: remove one of them")
+    return out
+
+
+def short_walks(ds: Dataset) -> list[str]:
+    n = ds.poses.groupby("walk_id", sort=False).size()
+    short = n[(n >= 2) & (n < MIN_WALK_STEPS)]
+    if not len(short):
+        return []
+    return [f"{len(short)} walk(s) with fewer than {MIN_WALK_STEPS} steps, too short to link by Wi-Fi: "
+            f"{[str(w) for w in short.index[:5]]}"]
+
+
+def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
+    """Each walk's median RSS difference (dB) to the other walks' co-located scans (walks with too few
+    co-located pairs are left out)."""
+    wifi = ds.wifi[["walk_id", "t_s", "bssid", "rssi_dbm"]]
+    if wifi["walk_id"].nunique() < 3:
+        return {}
+    scan = wifi.groupby(["walk_id", "t_s"], sort=False).ngroup().to_numpy()
+    keep = np.bincount(scan)[scan] >= MIN_SHARED_APS
+    wifi, scan = wifi[keep], scan[keep]
+    if not len(wifi):
+        return {}
+    rssi = wifi["rssi_dbm"].to_numpy(np.float64)
+    ap = pd.factorize(wifi["bssid"])[0]
+    walk_codes, walk_names = pd.factorize(wifi["walk_id"])
+    # the strongest AP of every scan names its group; scan_walk[s]: the walk of scan s
+    order = np.lexsort((-rssi, scan))
+    first = order[np.r_[True, scan[order][1:] != scan[order][:-1]]]
+    scan_walk = np.full(int(scan.max()) + 1, -1)
+    scan_walk[scan[first]] = walk_codes[first]
+    top = pd.Series(scan[first]).groupby(ap[first]).agg(list)
+    rng = np.random.default_rng(seed)
+    diffs: list[list[float]] = [[] for _ in walk_names]
+    for members in sorted(top, key=len, reverse=True)[:MAX_GROUPS]:
+        m = np.asarray(members)
+        if len(np.unique(scan_walk[m])) < 2:
+            continue
+        if len(m) > MAX_GROUP_SCANS:
+            m = rng.choice(m, MAX_GROUP_SCANS, replace=False)
+        _group_pairs(m, scan, ap, rssi, scan_walk, diffs)
+    return {str(walk_names[w]): float(np.median(d)) for w, d in enumerate(diffs) if len(d) >= MIN_PAIRS}
+
+
+def _row_nanmedian(a: np.ndarray) -> np.ndarray:
+    """Median of each row ignoring NaN (rows have at least one finite value)."""
+    n = np.isfinite(a).sum(axis=1)
+    srt = np.sort(a, axis=1)  # NaN last
+    lo = np.take_along_axis(srt, ((n - 1) // 2)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(srt, (n // 2)[:, None], axis=1)[:, 0]
+    return 0.5 * (lo + hi)
+
+
+def _group_pairs(members: np.ndarray, scan: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray,
+                 diffs: list[list[float]]) -> None:
+    """Median differences of the co-located scan pairs of one group, added to both walks' lists."""
+    sel = np.isin(scan, members)
+    row = pd.Index(members).get_indexer(scan[sel])
+    cols, col_ap = pd.factorize(ap[sel])
+    mat = np.full((len(members), len(col_ap)), np.nan)
+    mat[row, cols] = rssi[sel]
+    walks = scan_walk[members]
+    iu, ju = np.triu_indices(len(members), 1)
+    seen = np.isfinite(mat).astype(np.int32)
+    shared = (seen @ seen.T)[iu, ju]
+    ok = (walks[iu] != walks[ju]) & (shared >= MIN_SHARED_APS)
+    if not ok.any():
+        return
+    iu, ju = iu[ok], ju[ok]
+    dd = mat[iu] - mat[ju]
+    med = _row_nanmedian(dd)
+    mad = _row_nanmedian(np.abs(dd - med[:, None]))
+    co = mad <= COLOCATED_MAD_DB
+    for i, j, v in zip(walks[iu[co]], walks[ju[co]], med[co]):
+        diffs[i].append(float(v))
+        diffs[j].append(-float(v))

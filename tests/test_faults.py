@@ -1,0 +1,86 @@
+"""Fault injection: kill -9 at random points of a stage and right around its commit, SIGINT, two
+concurrent runs. After each, the workspace holds the old or the new version of the stage with valid
+checksums, and the next run works (`make fuzz` runs more: bench/fuzz/faults.py)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.fuzz.faults import (
+    ENV,
+    REPO,
+    argv,
+    copy_workspace,
+    kill_at_commit_point,
+    make_workspace,
+    old_or_new,
+    random_kills,
+    records,
+    rmbuild,
+    run_and_signal,
+)
+from rmbuild.io.lock import lock_path
+from rmbuild.io.workspace import Workspace
+
+
+@pytest.fixture(scope="module")
+def full_ws(tmp_path_factory) -> Path:
+    return make_workspace(tmp_path_factory.mktemp("faults"))
+
+
+@pytest.mark.parametrize("stage, point", [("optimize", "seal"), ("optimize", "between"), ("optimize", "after"),
+                                          ("ingest", "between")])
+def test_kill_around_the_commit(stage: str, point: str, full_ws: Path, tmp_path: Path) -> None:
+    root = copy_workspace(full_ws, tmp_path)
+    before = records(root)
+    assert kill_at_commit_point(root, stage, point) == -signal.SIGKILL
+    assert old_or_new(root, stage, before) == ("new" if point == "after" else "old")
+    r = rmbuild(argv(stage, root))  # the next run works and leaves a consistent workspace
+    assert r.returncode == 0, r.stderr
+    assert old_or_new(root, stage, records(root)) == "old"
+    assert not lock_path(root).exists()
+
+
+def test_kill_at_random_times(full_ws: Path, tmp_path: Path) -> None:
+    """kill -9 anywhere in a run (startup, reading, solving, writing, committing)."""
+    out = random_kills(copy_workspace(full_ws, tmp_path), "optimize", 3, np.random.default_rng(5))
+    assert out.get("inconsistent", 0) == 0 and out.get("unexpected exit", 0) == 0, out
+    assert out.get("old", 0) + out.get("new", 0) == 3 and out["next run ok"] == 1, out
+
+
+def test_sigint_keeps_the_old_stage_and_releases_the_lock(full_ws: Path, tmp_path: Path) -> None:
+    root = copy_workspace(full_ws, tmp_path)
+    before = records(root)
+    r = run_and_signal(argv("optimize", root), 0.05, signal.SIGINT, workspace=root)  # once optimize runs
+    assert r.returncode in (130, -signal.SIGINT), r.stderr  # the shell reports 130 for both
+    assert r.stderr.strip().splitlines() == ["interrupted; no partial outputs were kept"]
+    assert old_or_new(root, "optimize", before) == "old"
+    assert not lock_path(root).exists()
+
+
+def test_two_concurrent_runs(full_ws: Path, tmp_path: Path) -> None:
+    """Two optimize runs at once: one runs, the other is told the workspace is busy; nothing is mixed."""
+    root = copy_workspace(full_ws, tmp_path)
+    before = records(root)
+    procs = [subprocess.Popen([sys.executable, "-m", "rmbuild", *argv("optimize", root)], cwd=REPO, env=ENV,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    codes = sorted(c for c, _ in results)
+    assert codes in ([0, 0], [0, 75]), results
+    if codes == [0, 75]:
+        busy = next(e for c, e in results if c == 75)
+        assert "is busy" in busy and "rmbuild optimize" in busy
+    assert old_or_new(root, "optimize", before) == "new"
+    # two ingests creating one new workspace
+    fresh = tmp_path / "ws2"
+    procs = [subprocess.Popen([sys.executable, "-m", "rmbuild", "ingest", str(tmp_path / "in"), "-w", str(fresh),
+                               "-q"], cwd=REPO, env=ENV, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    codes = sorted(p.wait(timeout=300) for p in procs)
+    assert codes in ([0, 2], [0, 75]), codes  # 2: the second found the workspace made (no --force)
+    assert Workspace.open(fresh).verify("ingest") == []
