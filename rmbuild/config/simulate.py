@@ -278,30 +278,25 @@ class PhoneImuConfig:
     # "calling" (at the ear), "swinging" (in the hand, arm swinging), "pocket" (front trouser pocket).
     carry_modes: tuple[str, ...] = CARRY_MODES
     # Hz; range of a walk's IMU sampling rate (phones: 50-200 Hz).
-    sample_hz: tuple[float, float] = (50.0, 200.0)
+    sample_hz: tuple[float, float] = bounded((50.0, 200.0), 20.0, 500.0)
     # ms; 1-sigma jitter of the reported sample timestamps.
-    jitter_ms: float = 2.0
+    jitter_ms: float = bounded(2.0, 0.0, 20.0)
     # 1; range of a walk's gait intensity: the vertical bounce relative to an inverted pendulum with the
     # walk's step lengths (below 1 gentle, above 1 brisk).
-    bounce_scale: tuple[float, float] = (0.6, 1.4)
+    bounce_scale: tuple[float, float] = bounded((0.6, 1.4), 0.2, 3.0)
     # deg/s; 1-sigma of a walk's constant gyroscope bias on each axis.
-    gyro_bias_sd_dps: float = 0.3
+    gyro_bias_sd_dps: float = bounded(0.3, 0.0, 10.0)
     # m/s²; 1-sigma of the accelerometer's white noise.
-    acc_noise_mps2: float = 0.05
+    acc_noise_mps2: float = bounded(0.05, 0.0, 2.0)
     # rad/s; 1-sigma of the gyroscope's white noise.
-    gyro_noise_radps: float = 0.01
+    gyro_noise_radps: float = bounded(0.01, 0.0, 0.5)
 
     def validate(self) -> None:
         if not self.carry_modes or any(m not in CARRY_MODES for m in self.carry_modes):
             raise ValueError(f"phone.carry_modes must be a non-empty list of {list(CARRY_MODES)}")
-        _range("phone.sample_hz", self.sample_hz, 20.0, 500.0)
-        if not 0.0 <= self.jitter_ms <= 20.0:
-            raise ValueError("phone.jitter_ms must be in [0, 20]")
-        _range("phone.bounce_scale", self.bounce_scale, 0.2, 3.0)
-        if not 0.0 <= self.gyro_bias_sd_dps <= 10.0:
-            raise ValueError("phone.gyro_bias_sd_dps must be in [0, 10]")
-        if not 0.0 <= self.acc_noise_mps2 <= 2.0 or not 0.0 <= self.gyro_noise_radps <= 0.5:
-            raise ValueError("phone.acc_noise_mps2 must be in [0, 2] and phone.gyro_noise_radps in [0, 0.5]")
+        check_ranges(self)
+        _ordered("phone.sample_hz", self.sample_hz)
+        _ordered("phone.bounce_scale", self.bounce_scale)
 
 
 @dataclass(frozen=True)

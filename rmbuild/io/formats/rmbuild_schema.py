@@ -354,9 +354,9 @@ def _read_imu(files: list[Path]) -> dict[str, RawImu]:
     """Each walk's raw phone IMU from the ``imu`` files (times must increase within a walk)."""
     out: dict[str, RawImu] = {}
     for f in files:
-        loc = _Located(f, _read_file(f))
-        _check_columns(loc, IMU_REQ, IMU_OPT)
-        _coerce(loc, {**IMU_REQ, **IMU_OPT})
+        loc = read_located(f, IMU_REQ, IMU_OPT)
+        check_columns(loc, IMU_REQ, IMU_OPT)
+        coerce(loc, {**IMU_REQ, **IMU_OPT})
         df = loc.df
         first = 2 if loc.csv else 1   # CSV line of row 0 (after the header) / Parquet row number
         for wid, rows in df.groupby("walk_id", sort=False).indices.items():
