@@ -23,6 +23,8 @@ from scipy import ndimage
 FIELD_RESOLUTION_M = 0.5
 # m; the field extends this far beyond the plan
 FIELD_MARGIN_M = 20.0
+# deg; a lon/lat plan spanning more than this (about 5 km) is no building: its coordinates must be metres
+MAX_PLAN_SPAN_DEG = 0.05
 
 
 @dataclass(frozen=True)
@@ -190,3 +192,55 @@ def _signed_distance(walkable, bounds, res: float, margin: float):
     outside = ndimage.distance_transform_edt(~mask) * res
     inside = ndimage.distance_transform_edt(mask) * res
     return np.where(mask, -inside, outside), (ox, oy), res
+
+
+def to_geojson(plan: FloorPlan) -> dict:
+    """The plan in local metres as GeoJSON (the workspace's ``data/floorplan.geojson``): the outline
+    (``"type": "floor"``), the walkable space (``"walkable": true``) and the georeference, which
+    :func:`from_local_geojson` reads back."""
+
+    def feature(geom, **props) -> dict:
+        return {"type": "Feature", "properties": props, "geometry": shapely.geometry.mapping(geom)}
+
+    g = plan.georef
+    return {"type": "FeatureCollection", "name": plan.name, "frame": "local_m",
+            "georef": None if g is None else {"kind": g.kind, "lon0": g.lon0, "lat0": g.lat0, "bbox": list(g.bbox),
+                                               "size_m": list(g.size_m)},
+            "features": [feature(plan.outline, type="floor"), feature(plan.walkable, walkable=True)]}
+
+
+def from_local_geojson(doc: dict) -> FloorPlan:
+    """A plan written by :func:`to_geojson` (coordinates in local metres)."""
+    plan = from_features(doc["features"], lambda a: a, str(doc.get("name", "")))
+    g = doc.get("georef")
+    if g:
+        plan.georef = Georef(g["kind"], float(g["lon0"]), float(g["lat0"]), tuple(g["bbox"]),  # type: ignore[arg-type]
+                             tuple(g["size_m"]))  # type: ignore[arg-type]
+    return plan
+
+
+def from_user_geojson(doc: dict, name: str = "") -> FloorPlan:
+    """A user's plan: a GeoJSON FeatureCollection (the roles of its polygons: :func:`from_features`) in
+    WGS84 lon/lat (RFC 7946), projected to east/north metres about the outline's south-west corner, or in
+    local metres when the collection says ``"frame": "local_m"``. ValueError for anything else."""
+    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection" or not isinstance(doc.get("features"), list):
+        raise ValueError("not a GeoJSON FeatureCollection")
+    if doc.get("frame") == "local_m":
+        return from_local_geojson(doc) if doc.get("georef") else from_features(doc["features"], lambda a: a, name)
+    coords = np.array([c for f in doc["features"] if f.get("geometry")
+                       for c in _all_coords(f["geometry"].get("coordinates", []))], float).reshape(-1, 2)
+    if not len(coords) or np.abs(coords[:, 0]).max() > 180 or np.abs(coords[:, 1]).max() > 90 \
+            or np.ptp(coords, axis=0).max() > MAX_PLAN_SPAN_DEG:
+        raise ValueError("coordinates are not one building in WGS84 lon/lat (give \"frame\": \"local_m\" for "
+                         "metres)")
+    lon0, lat0 = float(coords[:, 0].min()), float(coords[:, 1].min())
+    plan = from_features(doc["features"], lonlat_to_enu(lon0, lat0), name)
+    plan.georef = Georef("enu", lon0, lat0)
+    return plan
+
+
+def _all_coords(c) -> list:
+    """The [x, y] positions of a nested GeoJSON coordinates array."""
+    if isinstance(c, (list, tuple)) and len(c) >= 2 and all(isinstance(v, (int, float)) for v in c[:2]):
+        return [list(c[:2])]
+    return [p for sub in (c or []) for p in _all_coords(sub)]

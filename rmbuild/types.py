@@ -29,6 +29,9 @@ FIX_COLUMNS = ("walk_id", "t_s", "x_m", "y_m", "label")
 TRUTH_POSE_COLUMNS = ("walk_id", "step", "t_s", "x_m", "y_m", "heading_rad")
 #: Anchors: known building-frame positions of a walk at a time (optional; fix the map's frame).
 ANCHOR_COLUMNS = ("walk_id", "t_s", "x_m", "y_m")
+#: Gauges (what fixed the optimised map's frame) whose frame is the building's: known anchor positions, or
+#: the floor plan. The other gauge, "se2", leaves the frame one walk's; comparisons to truth fit an SE(2).
+BUILDING_FRAME_GAUGES = ("anchors", "floorplan")
 
 
 @dataclass

@@ -52,7 +52,8 @@ def test_ilc_sample_floor_reads_with_its_plan_files():
     name, raw, summary = ingest(ILC_FLOOR)
     assert name == "msft-ilc"
     assert summary["walks"] == 12 and set(raw.walks["device_id"]) == {"PBCM10"}
-    assert any("ignored 3 floor companion file(s)" in n for n in raw.notes)
+    # the floor's plan comes along, in the waypoints' frame (local metres)
+    assert any(n.startswith("floor plan: F1") for n in raw.notes) and raw.floorplan["frame"] == "local_m"
     assert len(raw.fixes) == 86                                        # TYPE_WAYPOINT lines of the 12 traces
     assert summary["scans"] == pytest.approx(185, abs=10)
     assert summary["aps"] == pytest.approx(1024, rel=0.05)

@@ -74,3 +74,58 @@ def test_the_map_lands_in_the_plans_frame():
     assert r.stats["frame"] == "floorplan" and r.stats["evidence"]["floorplan"]["inside"] > 0.8
     # measured 0.95 m in the plan's frame (0.71 m after a fit to truth without the plan)
     assert trajectory_metrics(r.poses, ds, align=False)["landmark_error_m"]["mean"] < 2.0
+
+
+def test_user_plan_in_lonlat_and_metres(tmp_path):
+    """A user's plan in WGS84 lon/lat is projected to metres about its south-west corner; one in local metres
+    is taken as it is; anything else is a one-line error naming the file."""
+    from rmbuild.errors import InputError
+    from rmbuild.io.floorplan import fixes_inside_share, read_user_plan
+
+    lon0, lat0 = 11.0, 48.0
+    dlon, dlat = 40.0 / (111_320 * np.cos(np.radians(lat0))), 20.0 / 110_570  # ~40 m x 20 m
+    ring = [[lon0, lat0], [lon0 + dlon, lat0], [lon0 + dlon, lat0 + dlat], [lon0, lat0 + dlat], [lon0, lat0]]
+    geo = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"type": "floor"}, "geometry": {"type": "Polygon", "coordinates": [ring]}}]}
+    (tmp_path / "geo.geojson").write_text(json.dumps(geo))
+    doc = read_user_plan(tmp_path / "geo.geojson")
+    b = from_features(doc["features"], lambda a: a).bounds
+    assert b[0] == pytest.approx(0, abs=0.01) and b[2] == pytest.approx(40, rel=0.01)
+    assert b[3] == pytest.approx(20, rel=0.01)
+    assert fixes_inside_share(doc, np.array([[5.0, 5.0], [39.0, 19.0], [60.0, 5.0], [20.0, -10.0]])) == 0.5
+
+    local = {"type": "FeatureCollection", "frame": "local_m", "features": [_rect(0, 0, 30, 10, type="floor")]}
+    (tmp_path / "local.geojson").write_text(json.dumps(local))
+    assert from_features(read_user_plan(tmp_path / "local.geojson")["features"], lambda a: a).area_m2 == 300
+
+    (tmp_path / "metres_unsaid.geojson").write_text(json.dumps({**local, "frame": None}))
+    (tmp_path / "broken.geojson").write_text("{")
+    for name in ("metres_unsaid.geojson", "broken.geojson", "missing.geojson"):
+        with pytest.raises(InputError) as e:
+            read_user_plan(tmp_path / name)
+        assert name in str(e.value)
+
+
+def test_ingest_keeps_the_plan_and_optimize_uses_it_when_asked(tmp_path, capsys):
+    pytest.importorskip("gtsam")
+    from rmbuild.synthetic.venue import plan_geojson
+    from tests.cli_util import run_cli
+
+    sim = tmp_path / "sim"
+    assert run_cli(capsys, "simulate", sim, "--preset", "tiny", "--seed", "1", "-q").code == 0
+    plan = {**plan_geojson(json.loads((sim / "truth" / "venue.json").read_text())), "frame": "local_m"}
+    (tmp_path / "plan.geojson").write_text(json.dumps(plan))
+    ws = tmp_path / "ws"
+    res = run_cli(capsys, "ingest", sim, "-w", ws, "--floorplan", tmp_path / "plan.geojson")
+    assert res.code == 0, res.err
+    assert (ws / "data" / "floorplan.geojson").is_file() and "floor plan" in res.out
+    cfg = tmp_path / "fp.toml"
+    cfg.write_text("[optimize.floorplan]\nuse = true\n")
+    res = run_cli(capsys, "optimize", "-w", ws, "-q", "--config", cfg)
+    assert res.code == 0, res.err
+    assert json.loads((ws / "optimize" / "report.json").read_text())["gauge"] == "floorplan"
+    # asking for a plan the workspace lacks is an input error (exit 2, one line), not a traceback
+    bare = tmp_path / "bare"
+    assert run_cli(capsys, "ingest", sim, "-w", bare, "-q").code == 0
+    res = run_cli(capsys, "optimize", "-w", bare, "-q", "--config", cfg)
+    assert res.code == 2 and "no floor plan" in res.err and "Traceback" not in res.err

@@ -16,9 +16,12 @@ FORMAT_HELP = "Input format (default: recognised from the files): " + "; ".join(
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @workspace_option
 @click.option("--format", "fmt", type=click.Choice(reader_names()), default=None, help=FORMAT_HELP)
+@click.option("--floorplan", "floorplan", type=click.Path(dir_okay=False), default=None,
+              help="GeoJSON floor plan (WGS84 lon/lat, or metres with \"frame\": \"local_m\") in the frame of "
+                   "the data's fixes; kept in the workspace for `optimize` (optimize.floorplan.use) and pictures.")
 @rerun_option
 @common_options
-def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
+def ingest(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, verbose):
     """Read INPUTS (files or directories), validate them and create the workspace."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -29,7 +32,7 @@ def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
     pdr_cfg = load_stage_config("pdr", config_path)
     with stage_viewer(rerun, workspace, "ingest", quiet, force) as viewer, progress_display(quiet) as progress:
         s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg,
-                      viewer=viewer)
+                      viewer=viewer, floorplan=floorplan)
     if not quiet:
         skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
         click.echo(
@@ -38,5 +41,9 @@ def ingest(inputs, workspace, fmt, rerun, config_path, force, quiet, verbose):
             f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes) -> {workspace}"
             + (f"; skipped {skipped}" if skipped else "")
         )
+        if s.get("floorplan"):
+            fp = s["floorplan"]
+            inside = "" if fp["fixes_inside"] is None else f" ({fp['fixes_inside']:.0%} of the fixes inside)"
+            click.echo(f"floor plan {fp['name'] or '(unnamed)'} kept{inside}")
         for note in s["notes"]:
             click.echo(f"note: {note}", err=True)

@@ -47,6 +47,10 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
         how = "estimated" if vi.get("estimated") else "set"
         click.echo(f"  anisotropic pairs: {vi['anisotropic_pairs']} of {f['vicinity']}, sigma across/along "
                    f"{vi['across_ratio']:.2f} ({how}; optimize/pairs.parquet: anisotropic)")
+    plan = (r.get("evidence") or {}).get("floorplan")
+    if plan:
+        click.echo(f"  floor plan: {plan['inside']:.0%} of the reference component's poses in walkable space, "
+                   f"{plan['wall_priors']} wall priors, {plan['placed_components']} further component(s) placed")
     for name in ("raw", "optimized"):
         m = r.get(name) or {}
         lm = m.get("landmark_error_m")

@@ -112,6 +112,17 @@ class AnchorConfig:
 
 
 @dataclass(frozen=True)
+class FloorPlanConfig:
+    # build the map in the frame of the workspace's floor plan (`rmbuild ingest --floorplan`, or the plan an
+    # ILC floor brings), with wall priors on poses outside walkable space. Off by default: on the ILC floors
+    # the plan-frame map was 4-7 m less accurate than one SE(2) fitted to truth (docs/optimize.md).
+    use: bool = False
+
+    def validate(self) -> None:
+        pass
+
+
+@dataclass(frozen=True)
 class PlacementConfig:
     # "grow": walks fitted one round at a time to the map placed so far; "origin": every walk at (0, 0, 0)
     # in its own frame (paper).
@@ -168,11 +179,13 @@ class OptimizeConfig:
     compass: CompassConfig = field(default_factory=CompassConfig)
     continuity: ContinuityConfig = field(default_factory=ContinuityConfig)
     anchors: AnchorConfig = field(default_factory=AnchorConfig)
+    floorplan: FloorPlanConfig = field(default_factory=FloorPlanConfig)
     placement: PlacementConfig = field(default_factory=PlacementConfig)
     solve: SolveConfig = field(default_factory=SolveConfig)
 
     def validate(self) -> None:
-        for sub in (self.odometry, self.wifi, self.compass, self.continuity, self.anchors, self.placement, self.solve):
+        for sub in (self.odometry, self.wifi, self.compass, self.continuity, self.anchors, self.floorplan,
+                    self.placement, self.solve):
             sub.validate()
 
 

@@ -31,7 +31,7 @@ from rmbuild.errors import InputError
 from rmbuild.evaluate.trajectory import align_se2
 from rmbuild.localize.base import Query, make_localizer
 from rmbuild.radiomap.build import RadioMap, build_radio_map, grid_origin
-from rmbuild.types import Dataset, Fingerprints
+from rmbuild.types import BUILDING_FRAME_GAUGES, Dataset, Fingerprints
 
 MAP_NAMES = ("built", "surveyed", "raw")
 STAT_KEYS = ("mean", "median", "p75", "p90", "rmse", "max", "p_lt_5m", "p_lt_10m", "n")
@@ -288,7 +288,8 @@ def evaluate(
     """Build the built / surveyed / raw maps from the map walks and localize every test scan against each.
 
     ``built_xy``: float (n_nodes, 2) optimised node positions (row = node id). ``fingerprints``: the
-    per-node fingerprints (their ``bssids`` fix the AP order of all maps). ``gauge``: "anchors" or "se2".
+    per-node fingerprints (their ``bssids`` fix the AP order of all maps).
+    ``gauge``: "se2" or one of :data:`rmbuild.types.BUILDING_FRAME_GAUGES`.
     ``map_cfg``: how the maps are rasterised (default MapConfig()). Raises InputError for bad input.
     """
     cfg = cfg or EvaluateConfig()
@@ -298,8 +299,8 @@ def evaluate(
             c.validate()
         except ValueError as e:
             raise InputError(f"config: {e}") from None
-    if gauge not in ("anchors", "se2"):
-        raise InputError(f"gauge must be 'anchors' or 'se2', got {gauge!r}")
+    if gauge not in (*BUILDING_FRAME_GAUGES, "se2"):
+        raise InputError(f"gauge must be one of {', '.join((*BUILDING_FRAME_GAUGES, 'se2'))}, got {gauge!r}")
     built_xy = np.asarray(built_xy, dtype=float)
     if built_xy.shape != (dataset.n_nodes, 2):
         raise InputError(f"built positions have shape {built_xy.shape}, expected ({dataset.n_nodes}, 2)")
@@ -350,7 +351,7 @@ def evaluate(
     for name in MAP_NAMES:
         if name not in positions:
             continue
-        frame = "building" if (name == "surveyed" or alignment.get(name) in ("anchors", "se2")) else ""
+        frame = "building" if (name == "surveyed" or alignment.get(name) in (*BUILDING_FRAME_GAUGES, "se2")) else ""
         maps[name] = build_radio_map(wifi, positions[name], node_walk, map_cfg, origin, bssids=bssids,
                                      frame=frame)
 

@@ -81,6 +81,7 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_devices": "data/truth/devices.parquet",
     "data.truth_users": "data/truth/users.parquet",
     "data.truth_landmarks": "data/truth/landmarks.parquet",
+    "data.floorplan": "data/floorplan.geojson",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
     "optimize.initial_poses": "optimize/initial_poses.parquet",

@@ -13,6 +13,7 @@ from rmbuild.io.workspace import Workspace
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
 from rmbuild.stages.view import log_workspace
+from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 
@@ -40,8 +41,9 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     if anchors_path is None and ws.exists("optimize.anchors"):
         info["anchors"] = "used by optimize"
     if anchors_path is not None:
-        if info["gauge"] == "anchors":
-            info["anchors_note"] = "optimize already placed the walks with anchors; --anchors ignored"
+        if info["gauge"] in BUILDING_FRAME_GAUGES:
+            info["anchors_note"] = (f"optimize already placed the walks in the building frame ({info['gauge']}); "
+                                    "--anchors ignored")
         else:
             anchors = read_anchors(anchors_path)
             check_anchors(anchors, ds)

@@ -10,7 +10,7 @@ from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.evaluate.trajectory import align_se2, interpolate_xy
 from rmbuild.io.anchors import Anchors
 from rmbuild.io.workspace import Workspace
-from rmbuild.types import Dataset
+from rmbuild.types import BUILDING_FRAME_GAUGES, Dataset
 
 
 def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndarray, dict]:
@@ -38,7 +38,7 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
         info["left_out_walks"] = sorted(unlinked)
         xy[ds.poses["walk_id"].astype(str).isin(unlinked).to_numpy()] = np.nan
     ref = report.get("reference_walk")
-    info["frame"] = "building" if info["gauge"] == "anchors" else f"walk:{ref}" if ref else "reference walk"
+    info["frame"] = "building" if info["gauge"] in BUILDING_FRAME_GAUGES else f"walk:{ref}" if ref else "reference walk"
     return xy, info
 
 

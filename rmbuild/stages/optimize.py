@@ -13,7 +13,9 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config import OptimizeConfig, to_toml
+from rmbuild.errors import InputError
 from rmbuild.evaluate.trajectory import trajectory_metrics
+from rmbuild.floorplan import FloorPlan, from_local_geojson
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -21,6 +23,8 @@ from rmbuild.stages.view import log_workspace
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
+#: share of the reference component's poses in walkable space below which the plan fit is reported as doubtful
+PLAN_FIT_WARN_INSIDE = 0.5
 
 
 def tum_text(poses: pd.DataFrame) -> str:
@@ -56,7 +60,7 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     anchors = None
     if anchors_path is not None:
         anchors = read_anchors(anchors_path)
-        check_anchors(anchors, ds, cfg.solve.anchor_max_gap_s)
+        check_anchors(anchors, ds, cfg.anchors.max_gap_s)
     ws.check_can_write("optimize", force)
     state: dict[str, Any] = {"phase": None, "iter": 0}
 
@@ -73,8 +77,11 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
             progress.advance(0)
 
     anchor_table = anchors.table if anchors is not None else None
-    result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress)
-    gauge = "anchors" if anchor_table is not None and len(anchor_table) else "se2"
+    plan = _floor_plan(ws, cfg)
+    result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress, floorplan=plan)
+    has_anchors = anchor_table is not None and len(anchor_table) > 0
+    gauge = "anchors" if has_anchors else "floorplan" if plan is not None else "se2"
+    _warn_plan_fit(result.stats)
     t_metrics = time.perf_counter()
     raw = trajectory_metrics(ds.poses, ds, align=True)
     # the optimised walks' alignment is fitted on the linked walks: an unlinked walk's frame is arbitrary
@@ -114,6 +121,23 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         w.report = report
     log_workspace(ws, viewer)
     return report
+
+
+def _floor_plan(ws: Workspace, cfg: OptimizeConfig) -> FloorPlan | None:
+    """The workspace's floor plan when the config asks for it; an error when it asks and there is none."""
+    if not cfg.floorplan.use:
+        return None
+    if not ws.exists("data.floorplan"):
+        raise InputError("optimize.floorplan.use = true, but the workspace has no floor plan "
+                         "(`rmbuild ingest --floorplan FILE`)", str(ws.path("data.floorplan")))
+    return from_local_geojson(ws.read_json("data.floorplan"))
+
+
+def _warn_plan_fit(stats: dict) -> None:
+    fit = (stats.get("evidence") or {}).get("floorplan")
+    if fit and fit.get("inside", 1.0) < PLAN_FIT_WARN_INSIDE:
+        log.warning(f"floor plan: only {fit['inside']:.0%} of the reference component's poses fit its walkable "
+                    "space; the map may not sit in the plan's frame")
 
 
 def fmt_metric(m: dict | None, key: str) -> str:

@@ -6,13 +6,15 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.evaluate.trajectory import align_se2
+from rmbuild.types import BUILDING_FRAME_GAUGES
 
 
 def frame_to_truth(poses: pd.DataFrame, truth: pd.DataFrame | None, gauge: str | None = None
                    ) -> tuple[np.ndarray, np.ndarray] | None:
     """(R (2, 2), t (2,)) with building ≈ R @ map + t, fitted on all nodes; None without truth, when the
-    rows do not match, or with gauge "anchors" (the map frame is the building frame already)."""
-    if truth is None or gauge == "anchors" or len(truth) != len(poses) or len(poses) == 0:
+    rows do not match, or with a building-frame gauge (anchors, floor plan: the map frame is the building
+    frame already)."""
+    if truth is None or gauge in BUILDING_FRAME_GAUGES or len(truth) != len(poses) or len(poses) == 0:
         return None
     if "walk_id" in truth and not (truth["walk_id"].astype(str).to_numpy()
                                    == poses["walk_id"].astype(str).to_numpy()).all():

@@ -23,6 +23,7 @@ import pandas as pd
 
 from rmbuild import __version__
 from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
+from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz import figures
 from rmbuild.viz.align import apply, frame_to_truth, per_walk_to_truth
 
@@ -201,7 +202,7 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
         panels.append((title, shown))
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
-    plan_frame_ok = ds.truth_poses is not None or gauge == "anchors"
+    plan_frame_ok = ds.truth_poses is not None or gauge in BUILDING_FRAME_GAUGES
     fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses,
                                walls=walls if (plan_frame_ok or opt is None) else None)
     figs = [ReportFigure("walks", "Walks before and after optimisation", _png(fig),
@@ -224,8 +225,8 @@ def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, 
     cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
     walls_map = None
     if walls is not None:
-        if gauge == "anchors" or rt is None:
-            walls_map = walls if gauge == "anchors" else None
+        if gauge in BUILDING_FRAME_GAUGES or rt is None:
+            walls_map = walls if gauge in BUILDING_FRAME_GAUGES else None
         else:  # walls into the map (optimiser) frame: map = R^T (building - t)
             r, t = rt
             walls_map = ((walls.reshape(-1, 2) - t) @ r).reshape(-1, 4)

@@ -80,6 +80,8 @@ class RawInput:
     #: true for formats where one scan may list a BSSID twice (heard on two channels): such repeats of
     #: (walk, t_s, bssid) are merged (first kept) with a note; false (our schema): they are an input error
     merge_duplicate_readings: bool = False
+    #: the floor plan that came with the data (GeoJSON in local metres, :func:`rmbuild.floorplan.to_geojson`)
+    floorplan: dict | None = None
 
 
 class Reader(ABC):

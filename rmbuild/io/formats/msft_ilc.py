@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import gzip
 import io
+import json
 import re
 import zlib
 from collections import Counter
@@ -382,6 +383,23 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
                   n_dup)
 
 
+def _floor_plan(files: list[Path]) -> dict | None:
+    """The floor's plan (``geojson_map.json`` scaled by ``floor_info.json``'s width and height, the frame of
+    the waypoints) as local-metre GeoJSON, when both files are among the inputs."""
+    from rmbuild.floorplan import from_ilc, to_geojson
+
+    byname = {f.name: f for f in files}
+    if "geojson_map.json" not in byname or "floor_info.json" not in byname:
+        return None
+    try:
+        info = json.loads(byname["floor_info.json"].read_text())["map_info"]
+        doc = json.loads(byname["geojson_map.json"].read_text())
+        name = byname["geojson_map.json"].parent.name
+        return to_geojson(from_ilc(doc, float(info["width"]), float(info["height"]), name))
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+        raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
+
+
 @register
 class MsftIlcReader(Reader):
     name = FORMAT_NAME
@@ -398,9 +416,9 @@ class MsftIlcReader(Reader):
         opts = self.options
         traces = [f for f in files if f.name not in COMPANION_FILES]
         notes: list[str] = []
-        if len(traces) < len(files):
-            notes.append(f"ignored {len(files) - len(traces)} floor companion file(s) "
-                         f"({', '.join(COMPANION_FILES)})")
+        plan = _floor_plan(files)
+        if plan is not None:
+            notes.append(f"floor plan: {plan['name'] or 'geojson_map.json'} with its extent from floor_info.json")
         if not traces:
             raise InputError("no trace files (*.txt, *.txt.gz) among the inputs", str(files[0]))
         for f in traces:
@@ -451,6 +469,7 @@ class MsftIlcReader(Reader):
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines),
+            floorplan=plan,
         )
 
 
