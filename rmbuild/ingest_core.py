@@ -142,7 +142,9 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
             _first(dup)))
     missing = pose_walks - set(walks["walk_id"])
     if missing:
-        raise InputError(f"walk {_v(sorted(missing)[0])} has poses but no row in the walks table")
+        wid = sorted(missing)[0]
+        raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
+                         wp(_first((poses["walk_id"] == wid).to_numpy())))
 
 
 def attach(poses: pd.DataFrame, wifi: pd.DataFrame, cfg: IngestConfig) -> np.ndarray:
@@ -419,9 +421,10 @@ def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_ga
         t = out["t_s"].to_numpy()[rows]
         if len(g) == 0 or (t < g["t_s"].iloc[0] - max_gap_s).any() or (t > g["t_s"].iloc[-1] + max_gap_s).any():
             i = int(rows[0])
+            at = _where(raw, "truth/poses")(_first(tw == wid)) if len(g) else _where(raw, "poses")(i)
             raise InputError(
                 f"truth poses do not cover pose (walk {_v(poses['walk_id'].iloc[i])}, "
-                f"t_s={_v(poses['t_s'].iloc[i])})", "truth/poses")
+                f"t_s={_v(poses['t_s'].iloc[i])})", at)
         tt = g["t_s"].to_numpy(float)
         xyh[rows, 0] = np.interp(t, tt, g["x_m"].to_numpy(float))
         xyh[rows, 1] = np.interp(t, tt, g["y_m"].to_numpy(float))

@@ -19,12 +19,8 @@ from bench.fuzz.run import run_cases
 #: cases per kind in the suite (`make fuzz` draws 10,000 with the shares of bench.fuzz.cases.KINDS)
 SUITE_CASES = {"schema": 50, "schema_parquet": 15, "imu": 12, "ilc": 35, "ipin": 30, "config": 40, "anchors": 20}
 #: signature (regex on the case's stderr) -> the defect and where it is fixed
-KNOWN = {
-    r"MemoryError|OverflowError": "issue 24 points 1-2: a bad timestamp or an overlong line exhausts memory "
-                                  "(pdr/steps.py, io/formats/msft_ilc.py)",
-    r"has poses but no row in the walks table|error: truth/poses: ": "issue 24 point 9: ingest_core errors that "
-                                                                    "name no file",
-}
+KNOWN: dict[str, str] = {}  # none open: the earlier ones (memory on a bad ILC timestamp or an overlong line,
+#                            ingest errors naming no file) are fixed; their reproducers stay below
 
 
 def _known(r: dict) -> str | None:
@@ -57,7 +53,7 @@ def test_fuzzed_inputs_stay_within_memory_and_time(results: list[dict]) -> None:
     assert max(r["time_s"] for r in results if r.get("time_s") is not None) < 60
 
 
-# ------------------------------------------------------------------------------- reproducers of KNOWN
+# ----------------------------------------------------- reproducers (fixed defects stay as regression tests)
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "msft_ilc" / "tiny_trace.txt"
 
 
@@ -72,7 +68,6 @@ def _ilc_with_time(tmp_path: Path, value: str) -> Path:
     return tmp_path / "in"
 
 
-@pytest.mark.xfail(strict=True, reason=KNOWN[r"MemoryError|OverflowError"])
 @pytest.mark.parametrize("value", ["1", "9" * 20])
 def test_one_bad_ilc_timestamp_is_a_clean_error(value: str, tmp_path: Path, capsys) -> None:
     from cli_util import run_cli
@@ -81,7 +76,6 @@ def test_one_bad_ilc_timestamp_is_a_clean_error(value: str, tmp_path: Path, caps
     assert r.code in (0, 2) and "internal error" not in r.err, r.err
 
 
-@pytest.mark.xfail(strict=True, reason=KNOWN[r"has poses but no row in the walks table|error: truth/poses: "])
 def test_ingest_core_errors_name_their_file(tmp_path: Path, capsys) -> None:
     from cli_util import run_cli
     from conftest import make_input_tables, write_tables
@@ -93,7 +87,6 @@ def test_ingest_core_errors_name_their_file(tmp_path: Path, capsys) -> None:
     assert r.code == 2 and str(folder) in r.err, r.err
 
 
-@pytest.mark.xfail(strict=True, reason=KNOWN[r"MemoryError|OverflowError"])
 def test_an_overlong_ilc_line_is_a_clean_error(tmp_path: Path) -> None:
     """A 2 MB accelerometer line (one 2 MB value) in an ILC trace; run in a child process capped at 2 GB of
     address space and 60 s."""

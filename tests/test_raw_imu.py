@@ -42,12 +42,12 @@ def test_pdr_recovers_steps_and_distance(raw_imu_input: Path, tmp_path: Path, ca
         d_true = np.hypot(np.diff(tg["x_m"]), np.diff(tg["y_m"])).sum()
         # one step-length constant, the simulated users' gaits differ: the optimizer refines a scale per walk
         assert 0.7 < d_pdr / d_true < 1.35, (wid, d_pdr, d_true)
-    # the per-walk PDR report: in the walks table and in reports/ingest.json
+    # the per-walk PDR report: in the walks table and in data/report.json
     w = ds.walks.set_index("walk_id")
     assert (w["pdr_steps"] == ds.poses.groupby("walk_id").size() - 1).all()
     assert (w["pdr_quality"] == "ok").all() and (w["pdr_heading"] == "gyro").all()
     assert w["pdr_cadence_hz"].between(1.2, 2.5).all() and (w["pdr_length_m"] > 10).all()
-    rep = json.loads((tmp_path / "ws" / "reports" / "ingest.json").read_text())
+    rep = json.loads((tmp_path / "ws" / "data" / "report.json").read_text())
     assert set(rep["pdr"]) == set(w.index) and all(v["warnings"] == [] for v in rep["pdr"].values())
     # truth is interpolated at the PDR's step times
     assert ds.truth_poses is not None and np.isfinite(ds.truth_poses[["x_m", "y_m"]].to_numpy()).all()
