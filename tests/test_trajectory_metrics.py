@@ -79,6 +79,9 @@ def test_alignment_fitted_on_the_named_walks_only():
     err_a = np.linalg.norm(est.loc[~b, ["x_m", "y_m"]].to_numpy() - tru.loc[~b, ["x_m", "y_m"]].to_numpy(), axis=1)
     assert err_a.max() < 1e-9
     assert fit_a["landmark_error_m"]["mean"] == pytest.approx(20.0, abs=1e-6)  # (0 + 40) / 2
+    # the named walks' own landmark error, reported beside: walk a alone is exact
+    assert fit_a["landmark_error_fitted_walks_m"]["n"] == 1 and fit_a["landmark_error_fitted_walks_m"]["mean"] < 1e-6
+    assert "landmark_error_fitted_walks_m" not in fit_all
     assert fit_a["ate_m"]["max"] == pytest.approx(40.0, abs=1e-6)
     assert fit_a["heading_alignment_error_deg"]["mean"] < 1e-6
     # fitted on all walks, walk a is moved too: its landmark is no longer exact

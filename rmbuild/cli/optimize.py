@@ -57,3 +57,9 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
         click.echo(f"  {name:9s} ATE rmse {fmt_metric(m.get('ate_m'), 'rmse')} m, landmark error mean "
                    f"{fmt_metric(lm, 'mean')} m (max {fmt_metric(lm, 'max')}), heading error mean "
                    f"{fmt_metric(m.get('heading_alignment_error_deg'), 'mean')} deg")
+    lk = (r.get("optimized") or {}).get("landmark_error_fitted_walks_m")
+    al = r.get("metrics_alignment") or {}
+    if lk and al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]:
+        click.echo(f"  linked walks only ({r['metrics_alignment']['walks']} of {r['walks']}): landmark error mean "
+                   f"{fmt_metric(lk, 'mean')} m (max {fmt_metric(lk, 'max')}); the unlinked walks keep "
+                   "arbitrary frames and are left out of the map")

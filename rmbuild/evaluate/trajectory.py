@@ -123,7 +123,8 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
     optimiser passes the walks it linked, so that a walk it reports as unplaced (its frame arbitrary) does
     not turn and shift every other walk's figures; that walk's own error still counts in full. The fit
     uses the truth poses when they exist, otherwise the fixes. Returns ``{"ate_m", "landmark_error_m",
-    "heading_alignment_error_deg"}`` with ``None`` for what cannot be computed.
+    "heading_alignment_error_deg"}`` with ``None`` for what cannot be computed, and with ``fit_walks``
+    ``"landmark_error_fitted_walks_m"``: the landmark error of those walks alone.
     """
     truth = getattr(dataset, "truth_poses", None)
     fixes = getattr(dataset, "fixes", None)
@@ -157,4 +158,8 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
         out["heading_alignment_error_deg"] = heading_alignment_error_deg(poses_df, truth, world_R)
     if fixes is not None and len(fixes) > 0:
         out["landmark_error_m"] = landmark_error(poses_df, fixes, world_R, world_t)
+        if fit_walks is not None:
+            mine = fixes[fixes["walk_id"].astype(str).isin([str(w) for w in fit_walks])]
+            out["landmark_error_fitted_walks_m"] = (landmark_error(poses_df, mine, world_R, world_t) if len(mine)
+                                                    else None)
     return out
