@@ -115,7 +115,7 @@ def heading_alignment_error_deg(
 
 
 def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_walks=None) -> dict:
-    """The METRICS block of ``reports/optimize.json`` for one set of poses.
+    """The METRICS block of ``optimize/report.json`` for one set of poses.
 
     ``poses_df``: walk_id, step, t_s, x_m, y_m, heading_rad in ``dataset.poses`` row order (e.g. the raw
     poses, or the optimised ones). ``align``: one SE(2) transform, applied to all walks together, is fitted
