@@ -56,7 +56,7 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     anchors = None
     if anchors_path is not None:
         anchors = read_anchors(anchors_path)
-        check_anchors(anchors, ds, cfg.solve.anchor_max_gap_s)
+        check_anchors(anchors, ds, cfg.anchors.max_gap_s)
     ws.check_can_write("optimize", force)
     state: dict[str, Any] = {"phase": None, "iter": 0}
 
