@@ -10,22 +10,20 @@ heading corrections). Fields the papers leave open carry our default and say so.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
+from rmbuild.config.base import bounded, check_ranges
 
-def _range(name: str, r: tuple[float, float], lo: float | None = None, hi: float | None = None) -> None:
+#: largest seed a localizer's random generator takes from the config (numpy accepts any non-negative int;
+#: 32 bits are plenty and keep the value a plain TOML integer)
+MAX_SEED = 2**32 - 1
+
+
+def _ordered(name: str, r: tuple[float, float]) -> None:
     if not r[0] <= r[1]:
         raise ValueError(f"{name}: lower bound {r[0]} > upper bound {r[1]}")
-    if lo is not None and r[0] < lo:
-        raise ValueError(f"{name}: values must be >= {lo}, got {r[0]}")
-    if hi is not None and r[1] > hi:
-        raise ValueError(f"{name}: values must be <= {hi}, got {r[1]}")
-
-
-def _positive(name: str, v: float) -> None:
-    if not v > 0:
-        raise ValueError(f"{name} must be > 0, got {v}")
 
 
 @dataclass(frozen=True)
@@ -33,32 +31,32 @@ class SlacConfig:
     """SLAC: simultaneous localization and calibration (He et al. 2015, eq. 5-29, Algorithm 1)."""
 
     # scans; sliding window M of temporal targets jointly localized (He et al. 2015: 7).
-    window_scans: int = 7
+    window_scans: int = bounded(7, 2, 1000)
     # 1; particles P over the device model [k, b] (He et al. 2015: 60).
-    n_particles: int = 60
+    n_particles: int = bounded(60, 1, 10000)
     # m; σ_w, sensitivity of the particle weight to walked vs. estimated distance (eq. 22; He et al. 2015: 1).
-    sigma_w_m: float = 1.0
+    sigma_w_m: float = bounded(1.0, 0.001, 100.0)
     # 1; η, confidence factor of the convergence test ξ <= η sqrt(Var δ) (eq. 29; He et al. 2015: 1).
-    eta: float = 1.0
+    eta: float = bounded(1.0, 0.001, 100.0)
     # m; T, Berhu loss threshold (eq. 17; He et al. 2015: 2).
-    berhu_t_m: float = 2.0
+    berhu_t_m: float = bounded(2.0, 0.001, 100.0)
     # 1; N, candidate RPs per scan (the N smallest Γ) and the count in λ = max Γ / Σ Γ (eq. 14; He et al. 2015: 10).
-    n_candidates: int = 10
+    n_candidates: int = bounded(10, 1, 1000)
     # 1; an RP sharing fewer than this fraction of a scan's detected APs is not a candidate for it (ours:
     # Γ averages over shared APs only, so RPs sharing one lucky AP would win; when no RP reaches it, the
     # RPs sharing the most APs are the candidates). 0 = He et al. 2015 as written.
-    min_shared_fraction: float = 0.8
+    min_shared_fraction: float = bounded(0.8, 0.0, 1.0)
     # 1; g >= 1, signal bound γ = g Σ_m min_q Γ (eq. 19). Not given in He et al. 2015; ours. Raised to the
     # smallest feasible bound when the cap ω <= λ makes g Σ min Γ unreachable.
-    g: float = 1.3
+    g: float = bounded(1.3, 1.0, 100.0)
     # m/Hz; initial / allowed range of α in the step model S = α f + β (He et al. 2015: [0.1, 1]).
-    alpha_range: tuple[float, float] = (0.1, 1.0)
+    alpha_range: tuple[float, float] = bounded((0.1, 1.0), 0.0, 5.0)
     # m; initial / allowed range of β (He et al. 2015: [-0.5, 0]).
-    beta_range: tuple[float, float] = (-0.5, 0.0)
+    beta_range: tuple[float, float] = bounded((-0.5, 0.0), -5.0, 5.0)
     # 1; initial range of the device gain k (He et al. 2015: [0.1, 6]).
-    k_range: tuple[float, float] = (0.1, 6.0)
+    k_range: tuple[float, float] = bounded((0.1, 6.0), 0.001, 100.0)
     # dB; initial range of the device offset b (He et al. 2015: [-10, 0]).
-    b_range_db: tuple[float, float] = (-10.0, 0.0)
+    b_range_db: tuple[float, float] = bounded((-10.0, 0.0), -100.0, 100.0)
     # Which way [k, b] maps signals. "device": the test device reads φ = k ψ + b for a map-device reading ψ
     # (the simulator's model; the map is compared with (φ - b) / k). "calibration": He et al. 2015, eq. 5 literally,
     # φ̃ = k φ + b is compared with the map.
@@ -68,16 +66,16 @@ class SlacConfig:
     # [k, b] identifiable when the distance test alone is not, see docs/localizers.md).
     particle_weight: Literal["distance", "distance_signal"] = "distance_signal"
     # dB; per-AP noise std of the signal likelihood under particle_weight = "distance_signal" (ours).
-    signal_sigma_db: float = 4.0
+    signal_sigma_db: float = bounded(4.0, 0.1, 100.0)
     # dBm (device units); detection floor of the detection likelihood under "distance_signal" (ours): an
     # AP of the RP is expected in the scan with probability (1 - miss_prob) Φ((k ψ̄ + b - floor) / s), and
     # its absence or presence is scored. None = score only the detected APs' values.
-    detect_floor_dbm: float | None = -100.0
+    detect_floor_dbm: float | None = bounded(-100.0, -200.0, 0.0)
     # 1; probability that a clearly audible AP is still missing from a scan (detection likelihood).
-    miss_prob: float = 0.15
+    miss_prob: float = bounded(0.15, 0.0, 0.99)
     # 1; roughening after resampling: jitter std = roughen * (particle spread) * P^(-1/2) per parameter
     # (not in He et al. 2015: without it, [k, b] can never be finer than the initial draw).
-    roughen: float = 0.3
+    roughen: float = bounded(0.3, 0.0, 10.0)
     # "frequency": δ = Σ (α f_c + β) with [α, β] calibrated (He et al. 2015); "pdr": δ = Σ PDR step lengths
     # (α, β not calibrated; also the fallback, named in the result, when a walk has no step frequencies).
     step_source: Literal["frequency", "pdr"] = "frequency"
@@ -92,41 +90,18 @@ class SlacConfig:
     # scans; the convergence test runs only once at least this many scans of the walk were seen (ours;
     # with fewer, the particles collapse on little evidence and the test passes too early: measured on the
     # synthetic venue, k stopped at 1.0-1.1 of 1.25 with 7). 0 = the window size M (He et al. 2015).
-    min_scans_to_converge: int = 30
+    min_scans_to_converge: int = bounded(30, 0, 100000)
     # 1; projected-gradient iterations of the joint optimisation per window (warm-started).
-    solver_iters: int = 60
+    solver_iters: int = bounded(60, 1, 10000)
     # m; smoothing of |z| and of ‖x_m - x_n‖ near 0 in the joint optimisation (their kinks).
-    solver_eps_m: float = 0.05
+    solver_eps_m: float = bounded(0.05, 0.0001, 10.0)
     # 1; seed of the particle draws and resampling.
-    seed: int = 0
+    seed: int = bounded(0, 0, MAX_SEED)
 
     def validate(self) -> None:
-        if self.window_scans < 2:
-            raise ValueError("slac.window_scans must be >= 2")
-        if self.n_particles < 1:
-            raise ValueError("slac.n_particles must be >= 1")
-        for name in ("sigma_w_m", "eta", "berhu_t_m", "signal_sigma_db", "solver_eps_m"):
-            _positive(f"slac.{name}", getattr(self, name))
-        if self.n_candidates < 1:
-            raise ValueError("slac.n_candidates must be >= 1")
-        if not 0.0 <= self.min_shared_fraction <= 1.0:
-            raise ValueError("slac.min_shared_fraction must be in [0, 1]")
-        if self.g < 1.0:
-            raise ValueError("slac.g must be >= 1")
-        _range("slac.alpha_range", self.alpha_range, 0.0, 5.0)
-        _range("slac.beta_range", self.beta_range, -5.0, 5.0)
-        _range("slac.k_range", self.k_range, 1e-3, 100.0)
-        if self.k_range[0] <= 0:
-            raise ValueError("slac.k_range must be > 0")
-        _range("slac.b_range_db", self.b_range_db, -100.0, 100.0)
-        if self.roughen < 0:
-            raise ValueError("slac.roughen must be >= 0")
-        if not 0.0 <= self.miss_prob < 1.0:
-            raise ValueError("slac.miss_prob must be in [0, 1)")
-        if self.min_scans_to_converge < 0:
-            raise ValueError("slac.min_scans_to_converge must be >= 0")
-        if self.solver_iters < 1:
-            raise ValueError("slac.solver_iters must be >= 1")
+        check_ranges(self, "slac.")
+        for name in ("alpha_range", "beta_range", "k_range", "b_range_db"):
+            _ordered(f"slac.{name}", getattr(self, name))
 
 
 @dataclass(frozen=True)
@@ -135,18 +110,16 @@ class BayesConfig:
 
     # dB; kernel bandwidth σ of eq. 4 (Becker et al. 2015 gives none; ours). The per-RP kernel density of eq. 3 is
     # taken as N(ψ̄, σ² + σ_q²) with σ_q the RP's std when the map has it.
-    kernel_sigma_db: float = 4.0
+    kernel_sigma_db: float = bounded(4.0, 0.1, 100.0)
     # dBm; a reading missing on one side counts as this value (Gu et al. 2017, eq. 9: -110).
-    fill_dbm: float = -110.0
+    fill_dbm: float = bounded(-110.0, -200.0, 0.0)
     # 1; position interpolated from the K most probable RPs (eq. 5; Becker et al. 2015: 3).
-    k: int = 3
+    k: int = bounded(3, 1, 1000)
     # "cells" or "nodes": which view of a radio map the RPs are.
     reference: Literal["cells", "nodes"] = "cells"
 
     def validate(self) -> None:
-        _positive("nb.kernel_sigma_db", self.kernel_sigma_db)
-        if self.k < 1:
-            raise ValueError("nb.k must be >= 1")
+        check_ranges(self, "nb.")
 
 
 @dataclass(frozen=True)
@@ -158,21 +131,16 @@ class SsdConfig:
     """
 
     # 1; K nearest RPs by SSD distance, mean position (He et al. 2015's FL uses 15).
-    k: int = 15
+    k: int = bounded(15, 1, 1000)
     # 1; RPs sharing fewer detected APs with the scan are never neighbours (>= 2: one pair).
-    min_shared_aps: int = 3
+    min_shared_aps: int = bounded(3, 2, 1000)
     # 1; and sharing fewer than this fraction of the scan's detected APs.
-    min_shared_fraction: float = 0.5
+    min_shared_fraction: float = bounded(0.5, 0.0, 1.0)
     # "cells" or "nodes".
     reference: Literal["cells", "nodes"] = "cells"
 
     def validate(self) -> None:
-        if self.k < 1:
-            raise ValueError("ssd.k must be >= 1")
-        if self.min_shared_aps < 2:
-            raise ValueError("ssd.min_shared_aps must be >= 2")
-        if not 0.0 <= self.min_shared_fraction <= 1.0:
-            raise ValueError("ssd.min_shared_fraction must be in [0, 1]")
+        check_ranges(self, "ssd.")
 
 
 @dataclass(frozen=True)
@@ -181,39 +149,29 @@ class PflConfig:
     particle corrections of step length and heading)."""
 
     # 1; particles.
-    n_particles: int = 500
+    n_particles: int = bounded(500, 1, 100000)
     # m; σ of the initial position spread around the first scan's fingerprint fix.
-    init_sd_m: float = 5.0
+    init_sd_m: float = bounded(5.0, 0.001, 1000.0)
     # m; σ of the fingerprint fix (kNN position) in the measurement likelihood.
-    fix_sd_m: float = 6.0
+    fix_sd_m: float = bounded(6.0, 0.001, 1000.0)
     # 1; K of the kNN fix (He et al. 2015's FL: 15).
-    knn_k: int = 15
+    knn_k: int = bounded(15, 1, 1000)
     # 1; σ of the per-particle step-length scale around 1 (Chen et al. 2018: step length bias per particle).
-    step_scale_sd: float = 0.1
+    step_scale_sd: float = bounded(0.1, 0.0, 1.0)
     # 1; σ of the per-step random step-length noise (relative).
-    step_noise: float = 0.05
+    step_noise: float = bounded(0.05, 0.0, 1.0)
     # rad; σ of the per-step heading noise added to the particles' heading offset (Chen et al. 2018: heading bias).
-    heading_noise_rad: float = 0.03
+    heading_noise_rad: float = bounded(0.03, 0.0, math.pi)
     # "uniform": the walk frame's rotation into the map frame is unknown (uniform in [0, 2π));
     # "zero": the walk frame is the map frame's orientation.
     heading_init: Literal["uniform", "zero"] = "uniform"
     # 1; resample when the effective sample size falls below this fraction of the particles.
-    resample_ess: float = 0.5
+    resample_ess: float = bounded(0.5, 0.0, 1.0)
     # 1; seed.
-    seed: int = 0
+    seed: int = bounded(0, 0, MAX_SEED)
 
     def validate(self) -> None:
-        if self.n_particles < 1:
-            raise ValueError("pfl.n_particles must be >= 1")
-        for name in ("init_sd_m", "fix_sd_m"):
-            _positive(f"pfl.{name}", getattr(self, name))
-        if self.knn_k < 1:
-            raise ValueError("pfl.knn_k must be >= 1")
-        for name in ("step_scale_sd", "step_noise", "heading_noise_rad"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"pfl.{name} must be >= 0")
-        if not 0.0 <= self.resample_ess <= 1.0:
-            raise ValueError("pfl.resample_ess must be in [0, 1]")
+        check_ranges(self, "pfl.")
 
 
 @dataclass(frozen=True)
@@ -221,27 +179,23 @@ class SmoothingConfig:
     """Kalman post-filter of a localizer's track using PDR displacements (the subway-station paper §C)."""
 
     # m; σ of a localizer position (measurement noise R = σ²).
-    measurement_sd_m: float = 4.0
+    measurement_sd_m: float = bounded(4.0, 0.001, 1000.0)
     # m; process noise per scan interval, added to the PDR-predicted displacement (Q = (σ0 + σ1 d)², d =
     # PDR distance walked).
-    process_sd_m: float = 0.5
+    process_sd_m: float = bounded(0.5, 0.0, 100.0)
     # 1; process noise growing with the PDR distance walked in the interval (σ1).
-    process_sd_per_m: float = 0.1
+    process_sd_per_m: float = bounded(0.1, 0.0, 10.0)
     # scans; the rotation of the walk's PDR frame into the map frame is the least-squares angle between
     # PDR and localizer displacements over the last this many scans (causal).
-    rotation_window_scans: int = 15
+    rotation_window_scans: int = bounded(15, 2, 10000)
     # "filter": causal Kalman filter (the subway-station paper); "rts": plus a Rauch-Tung-Striebel
     # backward pass (offline).
     mode: Literal["filter", "rts"] = "filter"
 
     def validate(self) -> None:
-        _positive("smoothing.measurement_sd_m", self.measurement_sd_m)
-        if self.process_sd_m < 0 or self.process_sd_per_m < 0:
-            raise ValueError("smoothing process noise must be >= 0")
+        check_ranges(self, "smoothing.")
         if self.process_sd_m == 0 and self.process_sd_per_m == 0:
             raise ValueError("smoothing: process noise must not be 0")
-        if self.rotation_window_scans < 2:
-            raise ValueError("smoothing.rotation_window_scans must be >= 2")
 
 
 @dataclass(frozen=True)
@@ -250,21 +204,16 @@ class SsrConfig:
     φ_i / φ_j of the RSSI values in dBm, compared as log-ratios, so a device gain k cancels exactly."""
 
     # 1; K nearest RPs by SSR distance, mean position (SLAC's FL uses 15).
-    k: int = 15
+    k: int = bounded(15, 1, 1000)
     # 1; RPs sharing fewer detected APs with the scan are never neighbours (>= 2: one pair).
-    min_shared_aps: int = 3
+    min_shared_aps: int = bounded(3, 2, 1000)
     # 1; and sharing fewer than this fraction of the scan's detected APs.
-    min_shared_fraction: float = 0.5
+    min_shared_fraction: float = bounded(0.5, 0.0, 1.0)
     # "cells" or "nodes".
     reference: Literal["cells", "nodes"] = "cells"
 
     def validate(self) -> None:
-        if self.k < 1:
-            raise ValueError("ssr.k must be >= 1")
-        if self.min_shared_aps < 2:
-            raise ValueError("ssr.min_shared_aps must be >= 2")
-        if not 0.0 <= self.min_shared_fraction <= 1.0:
-            raise ValueError("ssr.min_shared_fraction must be in [0, 1]")
+        check_ranges(self, "ssr.")
 
 
 @dataclass(frozen=True)
@@ -274,26 +223,21 @@ class MllConfig:
 
     # scans; the window over which the likelihood product is maximised (SLAC's window M = 7; MLL's own is
     # not given).
-    window_scans: int = 7
+    window_scans: int = bounded(7, 1, 1000)
     # 1; RPs per scan kept as states (the most likely by Wi-Fi alone; ours, bounds the cost).
-    n_candidates: int = 30
+    n_candidates: int = bounded(30, 1, 1000)
     # m; σ of the walked-distance likelihood N(‖r_m − r_{m−1}‖ − δ_m; 0, σ²) (SLAC's T = 2 m, its measured
     # walked-distance error).
-    motion_sd_m: float = 2.0
+    motion_sd_m: float = bounded(2.0, 0.001, 100.0)
     # dB; σ of the per-AP Gaussian Wi-Fi likelihood (as naive Bayes: N(ψ̄, σ² + σ_q²); ours).
-    kernel_sigma_db: float = 4.0
+    kernel_sigma_db: float = bounded(4.0, 0.1, 100.0)
     # dBm; a reading missing on one side counts as this value.
-    fill_dbm: float = -110.0
+    fill_dbm: float = bounded(-110.0, -200.0, 0.0)
     # "cells" or "nodes".
     reference: Literal["cells", "nodes"] = "cells"
 
     def validate(self) -> None:
-        if self.window_scans < 1:
-            raise ValueError("mll.window_scans must be >= 1")
-        if self.n_candidates < 1:
-            raise ValueError("mll.n_candidates must be >= 1")
-        _positive("mll.motion_sd_m", self.motion_sd_m)
-        _positive("mll.kernel_sigma_db", self.kernel_sigma_db)
+        check_ranges(self, "mll.")
 
 
 @dataclass(frozen=True)
@@ -303,31 +247,24 @@ class SmartLocatorConfig:
 
     # 1; the largest accuracy factor Q a Wi-Fi fix gets (paper Fig. 6: 0.3); Q rises linearly from 0 to it
     # over aps_range APs in the scan.
-    q_max: float = 0.3
+    q_max: float = bounded(0.3, 0.0, 1.0)
     # APs; Q = 0 at the lower count, q_max at the upper (paper Fig. 6: 2 and 5).
-    aps_range: tuple[float, float] = (2.0, 5.0)
+    aps_range: tuple[float, float] = bounded((2.0, 5.0), 0.0, 1000.0)
     # 1/s; the time-dependent factor α_t grows by this per second since the last fix (paper Fig. 4: 0.04).
-    time_gain_per_s: float = 0.04
+    time_gain_per_s: float = bounded(0.04, 0.0, 10.0)
     # 1; and stops growing here (paper Fig. 4: 0.4 at 10 s).
-    time_gain_max: float = 0.4
+    time_gain_max: float = bounded(0.4, 0.0, 1.0)
     # 1; α of the static-weight variant `smartloc_static` (the paper's comparison: 0.5).
-    static_weight: float = 0.5
+    static_weight: float = bounded(0.5, 0.001, 1.0)
     # scans; the walk's PDR frame is rotated into the map frame by the least-squares angle between PDR and
     # fix displacements over the last this many scans (ours: the paper's PDR heading is a compass heading).
-    rotation_window_scans: int = 15
+    rotation_window_scans: int = bounded(15, 2, 10000)
 
     def validate(self) -> None:
-        if not 0.0 <= self.q_max <= 1.0:
-            raise ValueError("smartloc.q_max must be in [0, 1]")
-        _range("smartloc.aps_range", self.aps_range, 0.0)
+        check_ranges(self, "smartloc.")
+        _ordered("smartloc.aps_range", self.aps_range)
         if self.aps_range[0] == self.aps_range[1]:
             raise ValueError("smartloc.aps_range needs two different bounds")
-        if self.time_gain_per_s < 0 or not 0.0 <= self.time_gain_max <= 1.0:
-            raise ValueError("smartloc: time_gain_per_s must be >= 0 and time_gain_max in [0, 1]")
-        if not 0.0 < self.static_weight <= 1.0:
-            raise ValueError("smartloc.static_weight must be in (0, 1]")
-        if self.rotation_window_scans < 2:
-            raise ValueError("smartloc.rotation_window_scans must be >= 2")
 
 
 @dataclass(frozen=True)
@@ -344,38 +281,25 @@ class HistogramLocConfig:
     # dB; each map reading is spread over the neighbouring bins by a Gaussian of this σ before matching
     # (ours; 0 = the paper's plain histograms, whose bins a single scan rarely hits when a cell holds only
     # a few readings per AP).
-    smooth_db: float = 4.0
+    smooth_db: float = bounded(4.0, 0.0, 20.0)
     # 1; "mark": an RP is a candidate when at least this fraction of the scan's APs fall into an occupied
     # bin of its histograms (paper: 70 %); when none reaches it, those matching the most APs are.
-    match_fraction: float = 0.7
+    match_fraction: float = bounded(0.7, 0.0, 1.0)
     # 1; "mark": the best-marked candidates whose marks add up to this share of all candidates' marks are
     # averaged, weighted by mark (paper: 5 %).
-    mark_share: float = 0.05
+    mark_share: float = bounded(0.05, 0.0001, 1.0)
     # 1; "likelihood": probability of a reading in a bin where the RP's histogram of that AP has none.
-    floor_prob: float = 0.01
+    floor_prob: float = bounded(0.01, 1e-9, 0.99)
     # 1; "likelihood": the position is the posterior-weighted mean of the k most probable RPs.
-    k: int = 3
+    k: int = bounded(3, 1, 1000)
     # 1; D, the score's gain when the RP's walking direction is the walker's (paper: 1.2).
-    direction_gain: float = 1.2
+    direction_gain: float = bounded(1.2, 1.0, 100.0)
     # scans; `hist_dir` rotates the walk's PDR directions into the map frame by the least-squares angle
     # between PDR and its own direction-free fix displacements over the last this many scans (ours).
-    rotation_window_scans: int = 15
+    rotation_window_scans: int = bounded(15, 2, 10000)
 
     def validate(self) -> None:
-        if not 0.0 <= self.match_fraction <= 1.0:
-            raise ValueError("hist.match_fraction must be in [0, 1]")
-        if not 0.0 < self.mark_share <= 1.0:
-            raise ValueError("hist.mark_share must be in (0, 1]")
-        if not 0.0 <= self.smooth_db <= 20.0:
-            raise ValueError("hist.smooth_db must be in [0, 20]")
-        if not 0.0 < self.floor_prob < 1.0:
-            raise ValueError("hist.floor_prob must be in (0, 1)")
-        if self.k < 1:
-            raise ValueError("hist.k must be >= 1")
-        if self.direction_gain < 1.0:
-            raise ValueError("hist.direction_gain must be >= 1")
-        if self.rotation_window_scans < 2:
-            raise ValueError("hist.rotation_window_scans must be >= 2")
+        check_ranges(self, "hist.")
 
 
 @dataclass(frozen=True)
@@ -384,13 +308,13 @@ class OfflineCalibrationConfig:
     comparison case), φ_device = k ψ_map + b; see rmbuild.localize.calibration.fit_device_model."""
 
     # 1; the test device's gain k against the map's device (1 = same device).
-    k: float = 1.0
+    k: float = bounded(1.0, 0.001, 100.0)
     # dB; the test device's offset b (0 = same device).
-    b_db: float = 0.0
+    b_db: float = bounded(0.0, -100.0, 100.0)
     # registry name of the localizer that runs on the mapped scans (a single-scan one: knn, wknn, nb, ...).
     base: str = "knn"
 
     def validate(self) -> None:
-        _positive("offline_cal.k", self.k)
+        check_ranges(self, "offline_cal.")
         if self.base == "offline_cal":
             raise ValueError("offline_cal.base must name another localizer")

@@ -11,28 +11,28 @@ are in docs/optimize.md.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
+
+from rmbuild.config.base import bounded, check_ranges
 
 
 @dataclass(frozen=True)
 class OdometryConfig:
     # m; per-step 1-sigma of the dead-reckoned increment along / across the walking direction. paper: 1.
-    sigma_x_m: float = 0.05
-    sigma_y_m: float = 0.05
+    sigma_x_m: float = bounded(0.05, 0.001, 10.0)
+    sigma_y_m: float = bounded(0.05, 0.001, 10.0)
     # 1/rad²; heading information per step (sigma = 1/sqrt(mu); 8000 = 0.64 deg). paper: 20.
-    mu: float = 8000.0
+    mu: float = bounded(8000.0, 0.1, 1e7)
     # estimate one step-length scale per walk between solves (uncalibrated phone step lengths).
     estimate_scale: bool = True
     # bounds of a walk's step-length scale.
-    scale_min: float = 0.7
-    scale_max: float = 1.4
+    scale_min: float = bounded(0.7, 0.1, 1.0)
+    scale_max: float = bounded(1.4, 1.0, 10.0)
 
     def validate(self) -> None:
-        if self.sigma_x_m <= 0 or self.sigma_y_m <= 0 or self.mu <= 0:
-            raise ValueError("odometry sigmas and mu must be > 0")
-        if not 0 < self.scale_min <= 1 <= self.scale_max:
-            raise ValueError("need 0 < scale_min <= 1 <= scale_max")
+        check_ranges(self, "odometry.")
 
 
 @dataclass(frozen=True)
@@ -41,32 +41,27 @@ class WifiConfig:
     # "median_window" (paper: d(k, q) below the median distance in k's window of window_steps steps).
     search: Literal["run_matched", "median_window"] = "run_matched"
     # dBm; value of a missing AP in the RSS distance. paper: -110.
-    fill_dbm: float = -110.0
+    fill_dbm: float = bounded(-110.0, -200.0, 0.0)
     # steps; L, the window of a scan's own walk whose median RSS distance is its similarity threshold. paper: 20.
-    window_steps: int = 20
+    window_steps: int = bounded(20, 2, 10000)
     # APs a pair's two fingerprints must share.
-    min_common_aps: int = 3
+    min_common_aps: int = bounded(3, 0, 1000)
     # also search pairs within one walk (loop closures), checked against its own dead reckoning.
     within_walk: bool = True
     # m; eq. 10's fuzzy band: no error below d_min, a linear ramp to e_max at d_max, flat beyond. paper: 2 / 30.
-    d_min: float = 0.0
-    d_max: float = 6.0
-    # eq. 10's e_max and Ω_WiFi (a pair's sigma is (d_max - d_min) / (e_max·sqrt(Ω))). paper: 1 / not given.
-    e_max: float = 1.0
-    omega: float = 2.0
+    d_min: float = bounded(0.0, 0.0, 100.0)
+    d_max: float = bounded(6.0, 0.1, 1000.0)
+    # eq. 10's Ω_WiFi, the weight of a pair (its sigma is (d_max - d_min) / sqrt(Ω); e_max is fixed at the
+    # paper's 1). paper: not given.
+    omega: float = bounded(2.0, 0.01, 1000.0)
     # sigma across / along the walking direction of pairs of (anti)parallel nodes: 1 = isotropic (paper),
     # 0 = estimated from the solved pairs after each solve.
-    across_ratio: float = 0.0
+    across_ratio: float = bounded(0.0, 0.0, 1.0)
 
     def validate(self) -> None:
-        if self.window_steps < 2 or self.min_common_aps < 0:
-            raise ValueError("need window_steps >= 2 and min_common_aps >= 0")
-        if not 0 <= self.d_min < self.d_max:
-            raise ValueError("need 0 <= d_min < d_max")
-        if self.e_max <= 0 or self.omega <= 0:
-            raise ValueError("e_max and omega must be > 0")
-        if not 0 <= self.across_ratio <= 1:
-            raise ValueError("need 0 <= across_ratio <= 1")
+        check_ranges(self, "wifi.")
+        if not self.d_min < self.d_max:
+            raise ValueError("need d_min < d_max")
 
 
 @dataclass(frozen=True)
@@ -74,13 +69,12 @@ class CompassConfig:
     # use the phone's absolute heading (poses column yaw_abs_rad) for walk rotations and heading priors.
     use: bool = True
     # steps; a heading prior on every n-th step of the joint solve (0 = none).
-    prior_every_n: int = 10
+    prior_every_n: int = bounded(10, 0, 10000)
     # rad; 1-sigma of yaw_abs where the poses table gives none (yaw_abs_sigma_rad).
-    default_sigma_rad: float = 0.25
+    default_sigma_rad: float = bounded(0.25, 0.001, math.pi)
 
     def validate(self) -> None:
-        if self.prior_every_n < 0 or self.default_sigma_rad <= 0:
-            raise ValueError("need prior_every_n >= 0 and default_sigma_rad > 0")
+        check_ranges(self, "compass.")
 
 
 @dataclass(frozen=True)
@@ -89,26 +83,24 @@ class ContinuityConfig:
     # other by one surveyor); off automatically for a device whose walks overlap in time (relative clocks).
     use: bool = True
     # s; longest gap between one walk's end and the next one's start that still ties them.
-    max_gap_s: float = 60.0
+    max_gap_s: float = bounded(60.0, 0.0, 86400.0)
     # m/s; the tie's 1-sigma grows by this per second of gap (2 m at no gap): how far the surveyor may
     # have moved between the two recordings.
-    speed_m_s: float = 0.4
+    speed_m_s: float = bounded(0.4, 0.0, 10.0)
 
     def validate(self) -> None:
-        if self.max_gap_s < 0 or self.speed_m_s < 0:
-            raise ValueError("need max_gap_s >= 0 and speed_m_s >= 0")
+        check_ranges(self, "continuity.")
 
 
 @dataclass(frozen=True)
 class AnchorConfig:
     # m; 1-sigma of an anchor's position prior.
-    sigma_m: float = 0.5
+    sigma_m: float = bounded(0.5, 0.001, 100.0)
     # s; an anchor may lie this far outside its walk's time span (it then fixes that end pose).
-    max_gap_s: float = 2.0
+    max_gap_s: float = bounded(2.0, 0.0, 3600.0)
 
     def validate(self) -> None:
-        if self.sigma_m <= 0 or self.max_gap_s < 0:
-            raise ValueError("need sigma_m > 0 and max_gap_s >= 0")
+        check_ranges(self, "anchors.")
 
 
 @dataclass(frozen=True)
@@ -128,44 +120,38 @@ class PlacementConfig:
     # in its own frame (paper).
     method: Literal["grow", "origin"] = "grow"
     # m; a correspondence is an inlier of a placement when it puts its two nodes this close.
-    gate_m: float = 4.0
+    gate_m: float = bounded(4.0, 0.1, 100.0)
     # distinct inlier scans a placement needs: with the compass rotation / with a fitted rotation.
-    min_inliers: int = 3
-    min_inliers_se2: int = 6
+    min_inliers: int = bounded(3, 1, 10000)
+    min_inliers_se2: int = bounded(6, 2, 10000)
     # m of walked path the inliers must cover: with the compass rotation / with a fitted rotation.
-    min_shared_m: float = 6.0
-    min_shared_se2_m: float = 20.0
+    min_shared_m: float = bounded(6.0, 0.0, 10000.0)
+    min_shared_se2_m: float = bounded(20.0, 0.0, 10000.0)
     # a placement must lead the best one elsewhere by this factor and by min_lead inlier scans.
-    margin: float = 1.5
-    min_lead: int = 2
+    margin: float = bounded(1.5, 1.0, 100.0)
+    min_lead: int = bounded(2, 0, 10000)
     # m of walked path; a long walk is fitted on half-overlapping windows of this length (0 = whole walk).
-    window_m: float = 60.0
+    window_m: float = bounded(60.0, 0.0, 10000.0)
 
     def validate(self) -> None:
-        if self.gate_m <= 0 or self.min_inliers < 1 or self.min_inliers_se2 < 2 or self.min_lead < 0:
-            raise ValueError("need gate_m > 0, min_inliers >= 1, min_inliers_se2 >= 2, min_lead >= 0")
-        if self.min_shared_m < 0 or self.min_shared_se2_m < 0 or self.margin < 1 or self.window_m < 0:
-            raise ValueError("need min_shared_m, min_shared_se2_m, window_m >= 0 and margin >= 1")
+        check_ranges(self, "placement.")
 
 
 @dataclass(frozen=True)
 class SolveConfig:
     # Levenberg-Marquardt iterations per solve.
-    max_iterations: int = 10
+    max_iterations: int = bounded(10, 1, 1000)
     # solves that re-select the Wi-Fi pairs within d_max (scale rounds add theirs).
-    outer_iterations: int = 3
+    outer_iterations: int = bounded(3, 1, 100)
     # solve only the steps that carry more than odometry (exact for the chains between them).
     chain_reduction: bool = True
     # the solution is rejected (initial poses kept) when the odometry residual RMS exceeds this many
     # sigmas or the median walk shrinks below this fraction of its dead-reckoned extent.
-    max_odometry_rms_sigma: float = 5.0
-    min_extent_ratio: float = 0.8
+    max_odometry_rms_sigma: float = bounded(5.0, 0.1, 1e9)
+    min_extent_ratio: float = bounded(0.8, 0.0, 0.99)
 
     def validate(self) -> None:
-        if self.max_iterations < 1 or self.outer_iterations < 1:
-            raise ValueError("need max_iterations >= 1 and outer_iterations >= 1")
-        if self.max_odometry_rms_sigma <= 0 or not 0 <= self.min_extent_ratio < 1:
-            raise ValueError("need max_odometry_rms_sigma > 0 and 0 <= min_extent_ratio < 1")
+        check_ranges(self, "solve.")
 
 
 @dataclass(frozen=True)
@@ -194,7 +180,7 @@ def paper_config(**overrides) -> OptimizeConfig:
     d_min 2 m, d_max 30 m, one LM solve over every step, no compass, no scale, no checks."""
     cfg = OptimizeConfig(
         odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0, estimate_scale=False),
-        wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, e_max=1.0, omega=1.0, across_ratio=1.0),
+        wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, omega=1.0, across_ratio=1.0),
         compass=CompassConfig(use=False, prior_every_n=0),
         continuity=ContinuityConfig(use=False),
         placement=PlacementConfig(method="origin"),

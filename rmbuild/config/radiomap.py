@@ -42,17 +42,14 @@ class HistogramConfig:
     """Per-cell RSS histograms, kept apart by walking direction (the subway-station Wi-Fi + PDR paper)."""
 
     # dB; width of a histogram bin (paper: about 2 dB).
-    bin_db: float = 2.0
+    bin_db: float = bounded(2.0, 0.5, 50.0)
     # 1; walking-direction sectors the histograms are kept apart by, centred on the map's +x axis and
     # every 360/n deg from it (0 = no direction). The paper keeps the two directions of each straight
     # sub-area apart; 4 sectors do that for corridors along either map axis.
-    n_directions: int = 4
+    n_directions: int = bounded(4, 0, 36)
 
     def validate(self) -> None:
-        if not self.bin_db > 0:
-            raise ValueError("histogram.bin_db must be > 0")
-        if not 0 <= self.n_directions <= 36:
-            raise ValueError("histogram.n_directions must be in [0, 36]")
+        check_ranges(self, "histogram.")
 
 
 @dataclass(frozen=True)

@@ -126,14 +126,15 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
     "heading_alignment_error_deg"}`` with ``None`` for what cannot be computed, and with ``fit_walks``
     ``"landmark_error_fitted_walks_m"``: the landmark error of those walks alone.
     """
-    truth = getattr(dataset, "truth_poses", None)
+    truth: pd.DataFrame | None = getattr(dataset, "truth_poses", None)
     fixes = getattr(dataset, "fixes", None)
-    has_truth = truth is not None and len(truth) == len(poses_df) and len(truth) > 0
+    if truth is not None and not 0 < len(truth) == len(poses_df):
+        truth = None  # no truth row per pose: landmark errors only
     wids = poses_df["walk_id"].astype(str).to_numpy()
     sel = np.ones(len(poses_df), bool) if fit_walks is None else np.isin(wids, [str(w) for w in fit_walks])
     world_R, world_t = np.eye(2), np.zeros(2)
     if align:
-        if has_truth:
+        if truth is not None:
             est = poses_df[["x_m", "y_m"]].to_numpy(float)
             tru = truth[["x_m", "y_m"]].to_numpy(float)
             use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
@@ -152,7 +153,7 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
             if ok.sum() >= 2:
                 world_R, world_t = align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])
     out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}
-    if has_truth:
+    if truth is not None:
         est = poses_df[["x_m", "y_m"]].to_numpy(float) @ world_R.T + world_t
         out["ate_m"] = ate(est, truth[["x_m", "y_m"]].to_numpy(float), align=False)
         out["heading_alignment_error_deg"] = heading_alignment_error_deg(poses_df, truth, world_R)

@@ -56,10 +56,15 @@ def add_odometry(graph: gtsam.NonlinearFactorGraph, raw: np.ndarray, starts: np.
     return n
 
 
+# eq. 10's e_max, the plateau of the fuzzy error. Only e_max²·Ω_WiFi enters the cost, so the config
+# carries the weight in Ω alone and e_max stays at the paper's 1.
+E_MAX = 1.0
+
+
 def fuzzy_error(d: np.ndarray, cfg: WifiConfig) -> np.ndarray:
     """Gu et al., eq. 10: e(d) = 0 below d_min, e_max beyond d_max, linear in between (d in metres)."""
     d = np.asarray(d, dtype=float)
-    return cfg.e_max * np.clip((d - cfg.d_min) / (cfg.d_max - cfg.d_min), 0.0, 1.0)
+    return E_MAX * np.clip((d - cfg.d_min) / (cfg.d_max - cfg.d_min), 0.0, 1.0)
 
 
 def fuzzy_cost(d: np.ndarray, cfg: WifiConfig) -> np.ndarray:
@@ -69,7 +74,7 @@ def fuzzy_cost(d: np.ndarray, cfg: WifiConfig) -> np.ndarray:
 
 def _ramp_sigma(cfg: WifiConfig) -> float:
     """Sigma (m) that makes the whitened range residual r = (d - d_min)/sigma equal sqrt(Ω)·e(d)."""
-    return (cfg.d_max - cfg.d_min) / (cfg.e_max * np.sqrt(cfg.omega))
+    return (cfg.d_max - cfg.d_min) / (E_MAX * np.sqrt(cfg.omega))
 
 
 def vicinity_noise(cfg: WifiConfig) -> gtsam.noiseModel.Base:
@@ -77,7 +82,7 @@ def vicinity_noise(cfg: WifiConfig) -> gtsam.noiseModel.Base:
     TruncatedLeastSquares) at the whitened residual sqrt(Ω)·e_max, where eq. 10 turns flat. Exact for
     d >= d_min; below d_min it adds a tiny push-apart (about 0.5 % of the plateau)."""
     base = gtsam.noiseModel.Isotropic.Sigma(1, _ramp_sigma(cfg))
-    est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(cfg.e_max * np.sqrt(cfg.omega))
+    est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(E_MAX * np.sqrt(cfg.omega))
     return gtsam.noiseModel.Robust.Create(est, base)
 
 
@@ -99,7 +104,7 @@ def anisotropic_noise(cfg: WifiConfig, across_ratio: float) -> gtsam.noiseModel.
     radius e_max·sqrt(Ω), where eq. 10 turns flat (with d_min = 0)."""
     sigma = _ramp_sigma(cfg)
     base = gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma, across_ratio * sigma, _FREE_ROT_SIGMA]))
-    est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(cfg.e_max * np.sqrt(cfg.omega))
+    est = gtsam.noiseModel.mEstimator.TruncatedLeastSquares(E_MAX * np.sqrt(cfg.omega))
     return gtsam.noiseModel.Robust.Create(est, base)
 
 

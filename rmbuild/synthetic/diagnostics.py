@@ -96,9 +96,9 @@ def pair_rule_stats(
         d = rss_distance(rss[idx], rss[idx], fill_dbm)
         near = np.abs(step[idx][:, None] - step[idx][None, :]) <= half_window_steps
         np.fill_diagonal(near, False)
-        for r in range(len(idx)):
-            if near[r].any():
-                dmed[idx[r]] = np.median(d[r, near[r]])
+        for i in range(len(idx)):
+            if near[i].any():
+                dmed[idx[i]] = np.median(d[i, near[i]])
     n_pairs, n_far, dists = 0, 0, []
     for s in range(0, n, block):
         rows = np.arange(s, min(n, s + block))

@@ -78,6 +78,42 @@ def _walk_kinds(cfg: SimulateConfig, rng: np.random.Generator) -> list[str]:
     return [kinds[i] for i in rng.permutation(len(kinds))]
 
 
+@dataclass
+class _WalkPlan:
+    """One walk to simulate: id, route kind ("long" / "short" / "end_to_end"), role, user and device row."""
+
+    walk_id: str
+    kind: str
+    role: str
+    user: int
+    device: int
+    n_steps: int
+
+
+@dataclass
+class _Scans:
+    """The Wi-Fi scans of one walk before their readings are drawn: times, where the walker was at the
+    start / end of each scan, heading, the device model and the walk's scan random stream."""
+
+    walk_id: str
+    t_s: np.ndarray
+    xy0: np.ndarray
+    xy1: np.ndarray
+    heading: np.ndarray
+    k: float
+    b: float
+    rng: np.random.Generator
+
+
+@dataclass
+class _WalkTables:
+    poses: pd.DataFrame
+    truth: pd.DataFrame
+    start: tuple[str, float, float, float]
+    fixes: pd.DataFrame
+    scans: _Scans
+
+
 def simulate(cfg: SimulateConfig, progress: Callable[[str, float], None] | None = None) -> SimulatedData:
     """Simulate the venue, walks, sensors and Wi-Fi scans of ``cfg`` (deterministic in ``cfg.seed``).
 
@@ -93,9 +129,46 @@ def simulate(cfg: SimulateConfig, progress: Callable[[str, float], None] | None 
     radio = build_radio(cfg.radio, venue, rngs["radio"])
     magnetic = MagneticField(cfg.magnetometer, venue, rngs["magnetic"])
     router = Router(venue)
+    users, devices = _people(cfg, rngs["people"])
+    plans = _walk_plans(cfg, rngs["people"])
 
-    # people and phones
-    rp = rngs["people"]
+    n_walks = len(plans)
+    walk_seeds = seeds["walks"].spawn(n_walks)
+    scan_seeds = seeds["scans"].spawn(n_walks)
+    walks: list[_WalkTables] = []
+    for i, plan in enumerate(plans):
+        walks.append(_simulate_walk(cfg, plan, users[plan.user], devices.iloc[plan.device], venue, router, magnetic,
+                                    np.random.default_rng(walk_seeds[i]), np.random.default_rng(scan_seeds[i])))
+        report("walks", (i + 1) / n_walks)
+    wifi = _wifi_readings(cfg, radio, devices, [w.scans for w in walks], report)
+
+    data = SimulatedData(
+        walks=pd.DataFrame({
+            "walk_id": [p.walk_id for p in plans],
+            "device_id": [str(devices.iloc[p.device]["device_id"]) for p in plans],
+            "user_id": [users[p.user].user_id for p in plans],
+            "role": [p.role for p in plans],
+        }),
+        poses=pd.concat([w.poses for w in walks], ignore_index=True),
+        wifi=wifi,
+        fixes=pd.concat([w.fixes for w in walks], ignore_index=True),
+        truth_poses=pd.concat([w.truth for w in walks], ignore_index=True),
+        truth_aps=radio.truth_table(),
+        truth_devices=devices[["device_id", "k", "b"]].copy(),
+        truth_users=pd.DataFrame({"user_id": [u.user_id for u in users], "alpha": [u.alpha for u in users],
+                                  "beta": [u.beta for u in users]}),
+        truth_walks=pd.DataFrame([w.start for w in walks], columns=["walk_id", "x0_m", "y0_m", "heading0_rad"]),
+        truth_landmarks=pd.DataFrame({"label": venue.landmark_labels, "x_m": venue.landmark_xy[:, 0],
+                                      "y_m": venue.landmark_xy[:, 1]}),
+        venue=venue.to_dict(),
+        radio=radio,
+    )
+    report("done", 1.0)
+    return data
+
+
+def _people(cfg: SimulateConfig, rp: np.random.Generator) -> tuple[list[User], pd.DataFrame]:
+    """The walkers (step model) and the phones (device model k, b; magnetometer; scan period)."""
     wc = cfg.walkers
     users = []
     for i in range(wc.n_users):
@@ -113,113 +186,95 @@ def simulate(cfg: SimulateConfig, progress: Callable[[str, float], None] | None 
                          bool(rp.random() >= cfg.magnetometer.missing_fraction),
                          float(rp.uniform(*cfg.radio.scan_period_s))))
     devices = pd.DataFrame(dev_rows, columns=["device_id", "k", "b", "has_magnetometer", "scan_period_s"])
+    return users, devices
+
+
+def _walk_plans(cfg: SimulateConfig, rp: np.random.Generator) -> list[_WalkPlan]:
+    """Every walk's kind, role, user, device and step count (the last n_test_walks are test walks, on the
+    test device when there is one)."""
+    wc, dc = cfg.walkers, cfg.devices
     kinds = _walk_kinds(cfg, rp)
     n_walks = len(kinds)
-    n_test = wc.n_test_walks
-    walk_meta = []
+    plans = []
     for i, kind in enumerate(kinds):
-        role = "test" if i >= n_walks - n_test else "map"
+        role = "test" if i >= n_walks - wc.n_test_walks else "map"
         user = int(rp.integers(wc.n_users))
         on_test_device = role == "test" and dc.test_device is not None
         dev = dc.n_devices if on_test_device else int(rp.integers(dc.n_devices))
         lo, hi = wc.long_walk_steps if kind == "long" else wc.short_walk_steps
         n_steps = int(rp.integers(int(lo), int(hi) + 1))
-        walk_meta.append((f"w{i:03d}", kind, role, user, dev, n_steps))
+        plans.append(_WalkPlan(f"w{i:03d}", kind, role, user, dev, n_steps))
+    return plans
 
-    # walks
-    walk_seeds = seeds["walks"].spawn(n_walks)
-    scan_seeds = seeds["scans"].spawn(n_walks)
-    pose_parts, truth_parts, fix_parts, start_rows, scan_parts = [], [], [], [], []
-    for i, (wid, kind, _role, ui, di, n_steps) in enumerate(walk_meta):
-        rw = np.random.default_rng(walk_seeds[i])
-        user = users[ui]
-        dev = devices.iloc[di]
-        max_len = n_steps * (user.alpha * 3.0 + user.beta) + 20.0
-        route, pauses = plan_route(venue, router, wc, kind, max_len, rw)
-        t, xy, heading, freq, knot_t, knot_xy = walk_route(route, pauses, n_steps, user, wc, rw)
-        own_xy, own_heading = dead_reckon(t, xy, heading, cfg.imu, rw)
-        if bool(dev["has_magnetometer"]):
-            yaw = magnetic.observe(xy, heading, rw)
-            yaw_sigma = np.full(len(t), cfg.magnetometer.reported_sigma_rad)
-        else:
-            yaw = np.full(len(t), np.nan)
-            yaw_sigma = np.full(len(t), np.nan)
-        t_s = np.round(t, 3)
-        pose_parts.append(pd.DataFrame({
-            "walk_id": wid, "t_s": t_s, "x_m": own_xy[:, 0], "y_m": own_xy[:, 1], "heading_rad": own_heading,
-            "yaw_abs_rad": yaw, "yaw_abs_sigma_rad": yaw_sigma, "step_freq_hz": np.round(freq, 4),
-        }))
-        truth_parts.append(pd.DataFrame({
-            "walk_id": wid, "t_s": t_s, "x_m": xy[:, 0], "y_m": xy[:, 1], "heading_rad": heading,
-        }))
-        start_rows.append((wid, float(xy[0, 0]), float(xy[0, 1]), float(heading[0])))
-        fix_parts.append(_landmark_fixes(wid, t_s, xy, venue, cfg, rw))
-        # scan times and where the walker was then
-        rs = np.random.default_rng(scan_seeds[i])
-        period = float(dev["scan_period_s"])
-        n_max = int(t[-1] / period) + 3
-        gaps = period + rs.normal(0.0, cfg.radio.scan_jitter_s, n_max)
-        ts = rs.uniform(0.0, period) + np.cumsum(np.r_[0.0, gaps])
-        ts = np.round(ts[ts <= t[-1]], 3)
-        t0 = np.maximum(ts - cfg.radio.scan_duration_s, 0.0)
-        xy0 = np.c_[np.interp(t0, knot_t, knot_xy[:, 0]), np.interp(t0, knot_t, knot_xy[:, 1])]
-        xy1 = np.c_[np.interp(ts, knot_t, knot_xy[:, 0]), np.interp(ts, knot_t, knot_xy[:, 1])]
-        near = np.clip(np.searchsorted(t, ts), 0, len(t) - 1)
-        scan_parts.append((wid, ts, xy0, xy1, heading[near], float(dev["k"]), float(dev["b"]), rs))
-        report("walks", (i + 1) / n_walks)
 
-    # Wi-Fi: all scans of all walks in one vectorised pass (per walk rngs keep it order-independent)
+def _simulate_walk(cfg: SimulateConfig, plan: _WalkPlan, user: User, dev: pd.Series, venue: Venue, router: Router,
+                   magnetic: MagneticField, rw: np.random.Generator, rs: np.random.Generator) -> _WalkTables:
+    """One walk: its route and true poses, the dead-reckoned poses and compass of its phone, the landmark
+    fixes (``rw``), and the times and places of its scans (``rs``)."""
+    wid = plan.walk_id
+    max_len = plan.n_steps * (user.alpha * 3.0 + user.beta) + 20.0
+    route, pauses = plan_route(venue, router, cfg.walkers, plan.kind, max_len, rw)
+    t, xy, heading, freq, knot_t, knot_xy = walk_route(route, pauses, plan.n_steps, user, cfg.walkers, rw)
+    own_xy, own_heading = dead_reckon(t, xy, heading, cfg.imu, rw)
+    if bool(dev["has_magnetometer"]):
+        yaw = magnetic.observe(xy, heading, rw)
+        yaw_sigma = np.full(len(t), cfg.magnetometer.reported_sigma_rad)
+    else:
+        yaw = np.full(len(t), np.nan)
+        yaw_sigma = np.full(len(t), np.nan)
+    t_s = np.round(t, 3)
+    poses = pd.DataFrame({
+        "walk_id": wid, "t_s": t_s, "x_m": own_xy[:, 0], "y_m": own_xy[:, 1], "heading_rad": own_heading,
+        "yaw_abs_rad": yaw, "yaw_abs_sigma_rad": yaw_sigma, "step_freq_hz": np.round(freq, 4),
+    })
+    truth = pd.DataFrame({"walk_id": wid, "t_s": t_s, "x_m": xy[:, 0], "y_m": xy[:, 1], "heading_rad": heading})
+    start = (wid, float(xy[0, 0]), float(xy[0, 1]), float(heading[0]))
+    fixes = _landmark_fixes(wid, t_s, xy, venue, cfg, rw)
+    # scan times and where the walker was then
+    period = float(dev["scan_period_s"])
+    n_max = int(t[-1] / period) + 3
+    gaps = period + rs.normal(0.0, cfg.radio.scan_jitter_s, n_max)
+    ts = rs.uniform(0.0, period) + np.cumsum(np.r_[0.0, gaps])
+    ts = np.round(ts[ts <= t[-1]], 3)
+    t0 = np.maximum(ts - cfg.radio.scan_duration_s, 0.0)
+    xy0 = np.c_[np.interp(t0, knot_t, knot_xy[:, 0]), np.interp(t0, knot_t, knot_xy[:, 1])]
+    xy1 = np.c_[np.interp(ts, knot_t, knot_xy[:, 0]), np.interp(ts, knot_t, knot_xy[:, 1])]
+    near = np.clip(np.searchsorted(t, ts), 0, len(t) - 1)
+    scans = _Scans(wid, ts, xy0, xy1, heading[near], float(dev["k"]), float(dev["b"]), rs)
+    return _WalkTables(poses, truth, start, fixes, scans)
+
+
+def _wifi_readings(cfg: SimulateConfig, radio: RadioModel, devices: pd.DataFrame, scans: list[_Scans],
+                   report: Callable[[str, float], None]) -> pd.DataFrame:
+    """The Wi-Fi readings of every scan: the mean field of all scans in one vectorised pass, then each
+    walk's readings from its own random stream (so the result does not depend on the walk order)."""
     report("wifi", 0.0)
-    all_xy = np.vstack([np.vstack([p[2], p[3]]) for p in scan_parts])
+    all_xy = np.vstack([np.vstack([s.xy0, s.xy1]) for s in scans])
     cull = scan_cull_level(cfg.radio)
     cull = min(cull, (cull - float(devices["b"].max())) / float(devices["k"].min()))
     n_chunks = 10
     bounds = np.linspace(0, len(all_xy), n_chunks + 1).astype(int)
-    field = []
+    chunks = []
     for c in range(n_chunks):  # in pieces, only to report progress
-        field.append(radio.mean_rss_radios(all_xy[bounds[c]:bounds[c + 1]], cull_below_dbm=cull))
+        chunks.append(radio.mean_rss_radios(all_xy[bounds[c]:bounds[c + 1]], cull_below_dbm=cull))
         report("radio field", (c + 1) / n_chunks)
-    field = np.vstack(field)
+    field = np.vstack(chunks)
     wifi_parts = []
     at = 0
-    for j, (wid, ts, _xy0, xy1, sh, k, b, rs) in enumerate(scan_parts):
-        f0, f1 = field[at:at + len(ts)], field[at + len(ts):at + 2 * len(ts)]
-        at += 2 * len(ts)
-        si, bi, rssi = scan_readings(radio, cfg.radio, f0, f1, xy1, sh, k, b, rs)
+    for j, s in enumerate(scans):
+        n = len(s.t_s)
+        f0, f1 = field[at:at + n], field[at + n:at + 2 * n]
+        at += 2 * n
+        si, bi, rssi = scan_readings(radio, cfg.radio, f0, f1, s.xy1, s.heading, s.k, s.b, s.rng)
         df = pd.DataFrame({
-            "walk_id": wid, "t_s": ts[si], "bssid": radio.bssid[bi].astype(str), "rssi_dbm": rssi,
+            "walk_id": s.walk_id, "t_s": s.t_s[si], "bssid": radio.bssid[bi].astype(str), "rssi_dbm": rssi,
             "freq_mhz": radio.radio_freq_mhz[radio.bssid_radio[bi]].astype(np.int64),
             "ssid": radio.bssid_ssid[bi].astype(str),
         })
         df = df.sort_values(["t_s", "rssi_dbm", "bssid"], ascending=[True, False, True], kind="stable")
         wifi_parts.append(df)
-        report("wifi", (j + 1) / len(scan_parts))
-
-    walks = pd.DataFrame({
-        "walk_id": [m[0] for m in walk_meta],
-        "device_id": [str(devices.iloc[m[4]]["device_id"]) for m in walk_meta],
-        "user_id": [users[m[3]].user_id for m in walk_meta],
-        "role": [m[2] for m in walk_meta],
-    })
-    fixes = pd.concat(fix_parts, ignore_index=True)
-    data = SimulatedData(
-        walks=walks,
-        poses=pd.concat(pose_parts, ignore_index=True),
-        wifi=pd.concat(wifi_parts, ignore_index=True),
-        fixes=fixes,
-        truth_poses=pd.concat(truth_parts, ignore_index=True),
-        truth_aps=radio.truth_table(),
-        truth_devices=devices[["device_id", "k", "b"]].copy(),
-        truth_users=pd.DataFrame({"user_id": [u.user_id for u in users], "alpha": [u.alpha for u in users],
-                                  "beta": [u.beta for u in users]}),
-        truth_walks=pd.DataFrame(start_rows, columns=["walk_id", "x0_m", "y0_m", "heading0_rad"]),
-        truth_landmarks=pd.DataFrame({"label": venue.landmark_labels, "x_m": venue.landmark_xy[:, 0],
-                                      "y_m": venue.landmark_xy[:, 1]}),
-        venue=venue.to_dict(),
-        radio=radio,
-    )
-    report("done", 1.0)
-    return data
+        report("wifi", (j + 1) / len(scans))
+    return pd.concat(wifi_parts, ignore_index=True)
 
 
 def _landmark_fixes(

@@ -22,7 +22,13 @@ import pandas as pd
 from rmbuild import geometry
 from rmbuild.config.optimize import WifiConfig
 from rmbuild.slam.evidence.base import EvidenceSource, Links, SolveState, Update
-from rmbuild.slam.factors import anisotropic_factor, anisotropic_noise, vicinity_factor, vicinity_noise
+from rmbuild.slam.factors import (
+    anisotropic_factor,
+    anisotropic_noise,
+    fuzzy_error,
+    vicinity_factor,
+    vicinity_noise,
+)
 from rmbuild.slam.pairs import RowMeta, SearchParams, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.rfmodel import RFModel, calibrate
@@ -226,7 +232,7 @@ class WifiSource(EvidenceSource):
         used = self.candidates[use].reset_index(drop=True)
         pk, pq = used["node_k"].to_numpy(), used["node_q"].to_numpy()
         final_d = np.hypot(*(final_xyt[pk, :2] - final_xyt[pq, :2]).T)
-        e_fin = self.cfg.e_max * np.clip((final_d - self.cfg.d_min) / (self.cfg.d_max - self.cfg.d_min), 0, 1)
+        e_fin = fuzzy_error(final_d, self.cfg)
         ids = np.asarray(self.walks.walk_ids, dtype=object)
         w = self.walks.walk_of
         par = self._final_par
