@@ -419,6 +419,10 @@ class MsftIlcReader(Reader):
         plan = _floor_plan(files)
         if plan is not None:
             notes.append(f"floor plan: {plan['name'] or 'geojson_map.json'} with its extent from floor_info.json")
+        used = {"geojson_map.json", "floor_info.json"} if plan is not None else set()
+        unused = sorted({f.name for f in files if f.name in COMPANION_FILES} - used)
+        if unused:
+            notes.append(f"companion files not used: {', '.join(unused)}")
         if not traces:
             raise InputError("no trace files (*.txt, *.txt.gz) among the inputs", str(files[0]))
         for f in traces:
