@@ -58,9 +58,10 @@ run-real: $(STAMP)
 	@echo "  radio map:                              $(REAL_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(REAL_DIR)/workspace/report.html"
 
-## make test: ruff + the pytest suite
+## make test: ruff + mypy + the pytest suite
 test: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench
+	$(BIN)/mypy rmbuild
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q -x --durations=10
 
 ## make bench: benchmarks; figures go to bench/results/*.json and bench/results/SUMMARY.md
@@ -88,6 +89,7 @@ fuzz: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check rmbuild tests bench
+	$(BIN)/mypy rmbuild
 
 clean:
 	rm -rf runs .pytest_cache

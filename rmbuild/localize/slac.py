@@ -146,6 +146,70 @@ def _steps_between(t_scan: np.ndarray, steps: pd.DataFrame) -> _Steps:
     return _Steps(count, cf[hi] - cf[lo], cl[hi] - cl[lo], [f[a:b] for a, b in zip(lo, hi, strict=True)])
 
 
+@dataclass
+class _WalkData:
+    """One walk prepared for SLAC: Γ terms per scan (:meth:`SlacLocalizer._scan_terms`), detected APs, which
+    scans share an AP with the map and which RPs cover each scan, the steps between scans and their sums
+    carried to the next scan that shares an AP (``acc``: count, Σ f, Σ length), the step source used."""
+
+    terms: np.ndarray
+    det_scan: np.ndarray
+    has_rp: np.ndarray
+    coverage_ok: np.ndarray
+    st: _Steps
+    acc: np.ndarray
+    step_source: str
+    no_steps: bool
+    fallbacks: list[str]
+
+
+@dataclass
+class _Particles:
+    """SLAC's particles over one walk: device models (k_p, b_p), the shared step model (α, β), the weighted
+    device estimate and the scan at which the filter converged (None before)."""
+
+    kp: np.ndarray
+    bp: np.ndarray
+    alpha: float
+    beta: float
+    k_hat: float
+    b_hat: float
+    converged: int | None = None
+
+
+def _carried_steps(st: _Steps, has_rp: np.ndarray) -> np.ndarray:
+    """(3, n) step count, Σ f and Σ length since the previous scan that shares an AP with the map (the
+    steps before a scan that shares none carry over to the next one; 0 at such scans)."""
+    acc = np.zeros((3, len(has_rp)))
+    carry = np.zeros(3)
+    for i in range(len(has_rp)):
+        carry += (st.count[i], st.fsum[i], st.length[i])
+        if has_rp[i]:
+            acc[:, i] = carry
+            carry[:] = 0.0
+    return acc
+
+
+def _candidates(gam: np.ndarray, n_candidates: int) -> tuple[np.ndarray, ...]:
+    """The N RPs of least Γ per particle and window scan, in order of Γ: (cand, Γ, Γ with 0 where
+    invalid, valid, λ = max Γ / Σ Γ (eq. 14) raised to 1/|valid| so that the capped simplex is feasible)."""
+    n_c = min(n_candidates, gam.shape[2])
+    part = np.argpartition(gam, n_c - 1, axis=2)[..., :n_c] if n_c < gam.shape[2] else \
+        np.broadcast_to(np.arange(gam.shape[2]), gam.shape[:2] + (gam.shape[2],)).copy()
+    gc = np.take_along_axis(gam, part, axis=2)
+    o = np.argsort(gc, axis=2)
+    cand = np.take_along_axis(part, o, axis=2)
+    gc = np.take_along_axis(gc, o, axis=2)
+    valid = np.isfinite(gc)
+    nv = valid.sum(axis=2)
+    gz = np.where(valid, gc, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = gz.max(axis=2) / gz.sum(axis=2)
+    lam = np.where(np.isfinite(lam), lam, 1.0)
+    lam = np.maximum(lam, 1.0 / np.maximum(nv, 1))
+    return cand, gc, gz, valid, lam
+
+
 class SlacLocalizer:
     """SLAC (He et al. 2015). ``fit(radio_map)``, then ``predict(query)`` needs ``query.steps`` for each walk.
 
@@ -326,10 +390,32 @@ class SlacLocalizer:
         ((n, 2) positions, :class:`SlacWalkResult`)."""
         cfg = self.cfg
         n = len(t_s)
-        fallbacks: list[str] = []
         rng = np.random.default_rng(cfg.seed)
+        wd = self._walk_data(np.asarray(rss_dbm), np.asarray(t_s, dtype=float), steps, walk_id)
+        pt = self._initial_particles(rng)
         out = np.full((n, 2), np.nan)
         xi_hist = np.full(n, np.nan)
+        window: list[int] = []  # indices of valid scans in the window
+        seen = 0
+        for i in np.flatnonzero(wd.has_rp):
+            seen += 1
+            window.append(int(i))
+            if len(window) > cfg.window_scans:
+                window.pop(0)
+            out[i], xi_hist[i] = self._scan_update(wd, pt, np.array(window), seen, rng)
+        alpha, beta = pt.alpha, pt.beta
+        if wd.no_steps or wd.step_source != "frequency":
+            alpha, beta = float("nan"), float("nan")
+        conv = pt.converged
+        res = SlacWalkResult(walk_id, n, pt.k_hat, pt.b_hat, alpha, beta, conv,
+                             None if conv is None else float(t_s[conv]), xi_hist, wd.fallbacks)
+        return out, res
+
+    def _walk_data(self, rss: np.ndarray, t_s: np.ndarray, steps: pd.DataFrame | None, walk_id: str) -> _WalkData:
+        """One walk's inputs as SLAC uses them: the steps between scans (carried over scans that share no AP
+        with the map), the scans' Γ terms and which RPs cover each scan; the fallbacks taken."""
+        cfg = self.cfg
+        fallbacks: list[str] = []
         no_steps = steps is None or len(steps) == 0
         if no_steps:
             if cfg.no_steps == "error":
@@ -343,129 +429,109 @@ class SlacLocalizer:
                 steps["step_freq_hz"].to_numpy(dtype=float)).any():
             step_source = "pdr"
             fallbacks.append("steps:pdr")
-        if n < cfg.window_scans:
+        if len(t_s) < cfg.window_scans:
             fallbacks.append("window:short")
-        st = _steps_between(np.asarray(t_s, dtype=float), steps)
+        st = _steps_between(t_s, steps)
         if step_source == "frequency" and not no_steps:
-            f_all = steps["step_freq_hz"].to_numpy(dtype=float)
-            fmed = float(np.nanmedian(f_all))
+            fmed = float(np.nanmedian(steps["step_freq_hz"].to_numpy(dtype=float)))
             # steps with a missing frequency count at the walk's median frequency
             nan_cnt = np.array([np.isnan(f).sum() for f in st.freqs], dtype=float)
             st.fsum = st.fsum + nan_cnt * fmed
-        terms = self._scan_terms(np.asarray(rss_dbm))
-        det_scan = ~np.isnan(np.asarray(rss_dbm))
+        terms = self._scan_terms(rss)
         has_rp = (terms[2] > 0).any(axis=1)  # scan shares an AP with at least one RP
         # coverage: an RP must share >= min_shared_fraction of the scan's APs (or the best any RP shares)
-        n_scan_ap = (~np.isnan(np.asarray(rss_dbm))).sum(axis=1)
+        n_scan_ap = (~np.isnan(rss)).sum(axis=1)
         need = np.minimum(np.ceil(cfg.min_shared_fraction * n_scan_ap - 1e-9), terms[2].max(axis=1))
         coverage_ok = terms[2] >= np.maximum(need, 1.0)[:, None]
         if not has_rp.all():
             fallbacks.append("scan:no_shared_ap")
+        acc = _carried_steps(st, has_rp)
+        return _WalkData(terms, ~np.isnan(rss), has_rp, coverage_ok, st, acc, step_source, no_steps, fallbacks)
 
-        # particles, in the config's direction
-        p_n = cfg.n_particles
-        kp = rng.uniform(cfg.k_range[0], cfg.k_range[1], p_n)
-        bp = rng.uniform(cfg.b_range_db[0], cfg.b_range_db[1], p_n)
-        k_span = max(cfg.k_range[1] - cfg.k_range[0], 0.0)
-        b_span = max(cfg.b_range_db[1] - cfg.b_range_db[0], 0.0)
-        alpha = float(np.mean(cfg.alpha_range))
-        beta = float(np.mean(cfg.beta_range))
-        fixed = no_steps  # without steps nothing can be calibrated
-        converged: int | None = None
-        k_hat, b_hat = float(np.mean(kp)), float(np.mean(bp))
+    def _initial_particles(self, rng: np.random.Generator) -> _Particles:
+        """Device models drawn uniformly over the config's ranges, the step model at its ranges' centres."""
+        cfg = self.cfg
+        kp = rng.uniform(cfg.k_range[0], cfg.k_range[1], cfg.n_particles)
+        bp = rng.uniform(cfg.b_range_db[0], cfg.b_range_db[1], cfg.n_particles)
+        return _Particles(kp, bp, float(np.mean(cfg.alpha_range)), float(np.mean(cfg.beta_range)),
+                          float(np.mean(kp)), float(np.mean(bp)))
+
+    def _scan_update(self, wd: _WalkData, pt: _Particles, win: np.ndarray, seen: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, float]:
+        """The window ending at a new scan, solved for every particle; the particles weighted, the estimate
+        taken, then resampled and tested for convergence (or kept once converged). Returns (x̂, ξ)."""
+        cfg = self.cfg
+        kk, bb = to_map_units(pt.kp, pt.bp, cfg.device_model)
+        kk, bb = np.atleast_1d(kk), np.atleast_1d(bb)
+        gam, shared = self._gamma(wd.terms[:, win], kk, bb)
+        gam = np.where(wd.coverage_ok[win][None], gam, np.inf)
+        cand, gc, gz, valid, lam = _candidates(gam, cfg.n_candidates)
+        r_c = self._xy[cand]
+        p_cur = gam.shape[0]
+        acc_c, acc_f, acc_l = wd.acc[0][win], wd.acc[1][win], wd.acc[2][win]
+        frozen = wd.no_steps or pt.converged is not None
+        w, a_new, b_new = self._solve(gc, valid, lam, r_c, acc_f, acc_c, acc_l, pt.alpha, pt.beta,
+                                      np.full(p_cur, 1.0 / p_cur), frozen)
+        if not (frozen or wd.step_source != "frequency"):
+            pt.alpha, pt.beta = a_new, b_new
+        x = (w[..., None] * r_c).sum(axis=2)  # (P, W, 2)
+        logw = self._particle_logw(wd, pt, win, x, w, gz, cand, shared, kk, bb)
+        theta = np.exp(logw - logw.max())
+        theta /= theta.sum()
+        est = (theta[:, None] * x[:, -1]).sum(axis=0)
+        if pt.converged is not None:
+            return est, 0.0
+        return est, self._resample(wd, pt, win, seen, theta, x[:, -1], est, rng)
+
+    def _particle_logw(self, wd: _WalkData, pt: _Particles, win: np.ndarray, x: np.ndarray, w: np.ndarray,
+                       gz: np.ndarray, cand: np.ndarray, shared: np.ndarray, kk: np.ndarray,
+                       bb: np.ndarray) -> np.ndarray:
+        """Log particle weights (eq. 21-23): the walked distance against the steps', times (under
+        ``particle_weight = "distance_signal"``) the Gaussian likelihood of the newest scan given the
+        particle's weighted RPs (map units, with the Jacobian k' of u = k'φ + b' per shared AP)."""
+        cfg = self.cfg
+        p_cur = len(x)
+        acc_c, acc_f, acc_l = wd.acc[0][win], wd.acc[1][win], wd.acc[2][win]
+        if len(win) >= 2 and not wd.no_steps:
+            d_est = np.hypot(*np.moveaxis(np.diff(x, axis=1), 2, 0)).sum(axis=1)
+            delta = acc_l[1:].sum() if wd.step_source == "pdr" else \
+                float((pt.alpha * acc_f[1:] + pt.beta * acc_c[1:]).sum())
+            logw = -((delta - d_est) ** 2) / (2.0 * cfg.sigma_w_m ** 2)
+        else:
+            logw = np.zeros(p_cur)
+        if cfg.particle_weight == "distance_signal" and p_cur > 1:
+            s_new = np.take_along_axis(np.broadcast_to(shared[-1], (p_cur,) + shared[-1].shape),
+                                       cand[:, -1], axis=1)
+            ll = -0.5 * s_new * gz[:, -1] / cfg.signal_sigma_db ** 2 + s_new * np.log(np.abs(kk))[:, None]
+            if cfg.detect_floor_dbm is not None:
+                ll = ll + self._detection_ll(cand[:, -1], wd.det_scan[win[-1]], kk, bb)
+            logw = logw + (w[:, -1] * ll).sum(axis=1)
+        return logw
+
+    def _resample(self, wd: _WalkData, pt: _Particles, win: np.ndarray, seen: int, theta: np.ndarray,
+                  x_new: np.ndarray, est: np.ndarray, rng: np.random.Generator) -> float:
+        """k̂, b̂ from the weights; systematic resampling and roughening; the convergence test (eq. 26-29),
+        after which one particle at [k̂, b̂] stays. Returns ξ, the particles' mean distance to x̂."""
+        cfg = self.cfg
+        p_cur = len(theta)
+        pt.k_hat, pt.b_hat = float((theta * pt.kp).sum()), float((theta * pt.bp).sum())
+        idx = np.minimum(np.searchsorted(np.cumsum(theta), (rng.random() + np.arange(p_cur)) / p_cur), p_cur - 1)
+        xi = float(np.hypot(*(x_new[idx] - est).T).mean())
+        pt.kp, pt.bp = pt.kp[idx], pt.bp[idx]
+        if p_cur > 1 and cfg.roughen > 0:
+            k_span = max(cfg.k_range[1] - cfg.k_range[0], 0.0)
+            b_span = max(cfg.b_range_db[1] - cfg.b_range_db[0], 0.0)
+            sk = cfg.roughen * max(np.ptp(pt.kp), 0.02 * k_span) / np.sqrt(p_cur)
+            sb = cfg.roughen * max(np.ptp(pt.bp), 0.02 * b_span) / np.sqrt(p_cur)
+            pt.kp = np.clip(pt.kp + rng.normal(0, sk, p_cur), *cfg.k_range)
+            pt.bp = np.clip(pt.bp + rng.normal(0, sb, p_cur), *cfg.b_range_db)
         min_conv = cfg.min_scans_to_converge or cfg.window_scans
-        window: list[int] = []  # indices of valid scans in the window
-        # steps accumulated since the last valid scan (so a skipped scan's steps carry over)
-        acc_c = np.zeros(n)
-        acc_f = np.zeros(n)
-        acc_l = np.zeros(n)
-        carry = np.zeros(3)
-        seen = 0
-        for i in range(n):
-            carry += (st.count[i], st.fsum[i], st.length[i])
-            if not has_rp[i]:
-                continue
-            acc_c[i], acc_f[i], acc_l[i] = carry
-            carry[:] = 0.0
-            seen += 1
-            window.append(i)
-            if len(window) > cfg.window_scans:
-                window.pop(0)
-            win = np.array(window)
-            kk, bb = to_map_units(kp, bp, cfg.device_model)
-            gam, shared = self._gamma(terms[:, win], np.atleast_1d(kk), np.atleast_1d(bb))
-            gam = np.where(coverage_ok[win][None], gam, np.inf)
-            p_cur = gam.shape[0]
-            n_c = min(cfg.n_candidates, gam.shape[2])
-            part = np.argpartition(gam, n_c - 1, axis=2)[..., :n_c] if n_c < gam.shape[2] else \
-                np.broadcast_to(np.arange(gam.shape[2]), gam.shape[:2] + (gam.shape[2],)).copy()
-            gc = np.take_along_axis(gam, part, axis=2)
-            o = np.argsort(gc, axis=2)
-            cand = np.take_along_axis(part, o, axis=2)
-            gc = np.take_along_axis(gc, o, axis=2)
-            valid = np.isfinite(gc)
-            nv = valid.sum(axis=2)
-            gz = np.where(valid, gc, 0.0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                lam = gz.max(axis=2) / gz.sum(axis=2)
-            lam = np.where(np.isfinite(lam), lam, 1.0)
-            lam = np.maximum(lam, 1.0 / np.maximum(nv, 1))  # feasibility: cap · |valid| >= 1
-            r_c = self._xy[cand]
-            theta_prev = np.full(p_cur, 1.0 / p_cur)
-            w, a_new, b_new = self._solve(gc, valid, lam, r_c, acc_f[win], acc_c[win], acc_l[win],
-                                          alpha, beta, theta_prev, fixed or converged is not None or no_steps)
-            if not (fixed or converged is not None or step_source != "frequency"):
-                alpha, beta = a_new, b_new
-            x = (w[..., None] * r_c).sum(axis=2)  # (P, W, 2)
-            # particle weights (eq. 21-23)
-            if len(win) >= 2 and not no_steps:
-                d_est = np.hypot(*np.moveaxis(np.diff(x, axis=1), 2, 0)).sum(axis=1)
-                delta = acc_l[win][1:].sum() if step_source == "pdr" else \
-                    float((alpha * acc_f[win][1:] + beta * acc_c[win][1:]).sum())
-                logw = -((delta - d_est) ** 2) / (2.0 * cfg.sigma_w_m ** 2)
-            else:
-                logw = np.zeros(p_cur)
-            if cfg.particle_weight == "distance_signal" and p_cur > 1:
-                # Gaussian likelihood of the newest scan given the particle's weighted RPs (map units,
-                # with the Jacobian k' of u = k'φ + b' per shared AP)
-                s_new = np.take_along_axis(np.broadcast_to(shared[-1], (p_cur,) + shared[-1].shape),
-                                           cand[:, -1], axis=1)
-                ll = -0.5 * s_new * gz[:, -1] / cfg.signal_sigma_db ** 2 + s_new * np.log(np.abs(kk))[:, None]
-                if cfg.detect_floor_dbm is not None:
-                    ll = ll + self._detection_ll(cand[:, -1], det_scan[win[-1]], kk, bb)
-                logw = logw + (w[:, -1] * ll).sum(axis=1)
-            theta = np.exp(logw - logw.max())
-            theta /= theta.sum()
-            est = (theta[:, None] * x[:, -1]).sum(axis=0)
-            out[i] = est
-            if converged is None:
-                k_hat, b_hat = float((theta * kp).sum()), float((theta * bp).sum())
-                # resampling (systematic) and roughening
-                idx = np.minimum(np.searchsorted(np.cumsum(theta), (rng.random() + np.arange(p_cur)) / p_cur),
-                                 p_cur - 1)
-                xi = float(np.hypot(*(x[idx, -1] - est).T).mean())
-                xi_hist[i] = xi
-                kp, bp = kp[idx], bp[idx]
-                if p_cur > 1 and cfg.roughen > 0:
-                    sk = cfg.roughen * max(np.ptp(kp), 0.02 * k_span) / np.sqrt(p_cur)
-                    sb = cfg.roughen * max(np.ptp(bp), 0.02 * b_span) / np.sqrt(p_cur)
-                    kp = np.clip(kp + rng.normal(0, sk, p_cur), *cfg.k_range)
-                    bp = np.clip(bp + rng.normal(0, sb, p_cur), *cfg.b_range_db)
-                # convergence (eq. 26-29)
-                if cfg.converge and not no_steps and seen >= min_conv and p_cur > 1:
-                    fw = np.concatenate([st.freqs[j] for j in win]) if len(win) else np.zeros(0)
-                    fw = fw[np.isfinite(fw)]
-                    var_f = float(fw.var()) if fw.size > 1 else 0.0
-                    var_s = alpha ** 2 * var_f + beta ** 2
-                    var_d = acc_c[win[-1]] * var_s
-                    if xi <= cfg.eta * np.sqrt(var_d):
-                        converged = i
-                        kp, bp = np.array([k_hat]), np.array([b_hat])
-            else:
-                xi_hist[i] = 0.0
-        if no_steps or step_source != "frequency":
-            alpha, beta = float("nan"), float("nan")
-        conv_scan = None if converged is None else int(converged)
-        res = SlacWalkResult(walk_id, n, k_hat, b_hat, alpha, beta, conv_scan,
-                             None if conv_scan is None else float(t_s[conv_scan]), xi_hist, fallbacks)
-        return out, res
+        if cfg.converge and not wd.no_steps and seen >= min_conv and p_cur > 1:
+            fw = np.concatenate([wd.st.freqs[j] for j in win]) if len(win) else np.zeros(0)
+            fw = fw[np.isfinite(fw)]
+            var_f = float(fw.var()) if fw.size > 1 else 0.0
+            var_d = wd.acc[0][win[-1]] * (pt.alpha ** 2 * var_f + pt.beta ** 2)
+            if xi <= cfg.eta * np.sqrt(var_d):
+                pt.converged = int(win[-1])
+                pt.kp, pt.bp = np.array([pt.k_hat]), np.array([pt.b_hat])
+        return xi
