@@ -267,8 +267,9 @@ def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: SearchParams) -> pd
             "common": com[p, bi, bj][valid].astype(np.int32), "run_dist": best[valid].astype(np.float32),
             "direction": bdir[valid],
         }))
-    df = pd.concat(out, ignore_index=True) if out else pd.DataFrame(
-        columns=["row_k", "row_q", "rss_dist", "common", "run_dist", "direction"])
+    df = pd.concat(out, ignore_index=True) if out else pd.DataFrame({  # no pair (sparse Wi-Fi): typed, empty
+        "row_k": np.zeros(0, np.int64), "row_q": np.zeros(0, np.int64), "rss_dist": np.zeros(0, np.float32),
+        "common": np.zeros(0, np.int32), "run_dist": np.zeros(0, np.float32), "direction": np.zeros(0, np.int64)})
     a = np.minimum(df["row_k"].to_numpy(), df["row_q"].to_numpy())
     b = np.maximum(df["row_k"].to_numpy(), df["row_q"].to_numpy())
     df["row_k"], df["row_q"] = a, b
