@@ -72,7 +72,9 @@ def test_config_command_prints_a_file_that_loads_back(tmp_path: Path, capsys) ->
     for name in SECTIONS:
         assert load_stage_config(name, tmp_path / "all.toml") == SECTIONS[name]()
     r = run_cli(capsys, "config", "--stage", "nope")
-    assert r.code == 2 and "unknown section 'nope'" in r.err
+    assert r.code == 2 and "'nope' is not one of" in r.err and len(r.err.strip().splitlines()) == 1
+    r = run_cli(capsys, "config", "--stage", "ingest,map", "--stage", "pdr,ingest")  # comma and repeat
+    assert r.code == 0 and [k for k in tomllib.loads(r.out)] == ["ingest", "map", "pdr"]
 
 
 # ------------------------------------------------------------------------------- ranges and file errors

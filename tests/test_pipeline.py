@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pandas as pd
@@ -102,6 +103,19 @@ def test_unknown_localizer_and_test_walk(tiny_ws: Path, capsys) -> None:
     assert r.code == 2 and "magic" in r.err
     r = run_cli(capsys, "evaluate", "-w", tiny_ws / "ws", "--test-walks", "nope")
     assert r.code == 2 and "unknown walk 'nope'" in r.err
+
+
+def test_list_options_are_repeatable_and_comma_separated(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    shutil.copytree(tiny_ws / "ws", tmp_path / "ws")
+    walks = sorted(Workspace.open(tmp_path / "ws").read_table("data.walks")["walk_id"].astype(str))
+    r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "-q", "--localizer", "knn,nb",
+                "--localizer", "knn", "--test-walks", walks[0], "--test-walks", f"{walks[1]},{walks[0]}")
+    assert r.code == 0, r.err
+    rep = json.loads(Workspace.open(tmp_path / "ws").report_path("evaluate").read_text())
+    assert rep["test_walks"] == walks[:2]
+    assert all(set(m) == {"knn", "nb"} for m in rep["maps"].values())
+    r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "--localizer", "knn,magic")
+    assert r.code == 2 and "'magic' is not one of" in r.err and len(r.err.strip().splitlines()) == 1
 
 
 def test_evaluate_without_ground_truth(tmp_path: Path, capsys) -> None:

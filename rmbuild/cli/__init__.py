@@ -132,6 +132,10 @@ def _dispatch(argv: list[str] | None, ctrl_c: _CtrlC) -> int:
     except (click.exceptions.Abort, KeyboardInterrupt):  # click turns Ctrl-C into Abort
         click.echo("interrupted; no partial outputs were kept", err=True)
         return 130
+    except click.UsageError as e:  # a bad option or argument: one line, like every other input error
+        where = e.ctx.command_path if e.ctx is not None else "rmbuild"
+        click.echo(f"error: {one_line(e.format_message())} (see '{where} --help')", err=True)
+        return 2
     except click.ClickException as e:
         e.show()
         return 2 if e.exit_code in (1, 2) else e.exit_code

@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.options import common_options, list_option, stage_viewer, start, workspace_option
 from rmbuild.cli.view import rerun_option
 from rmbuild.localize.registry import describe, localizer_names
 
 
 @click.command()
 @workspace_option
-@click.option("--test-walks", default=None, metavar="ID,ID,...",
-              help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
-@click.option("--localizer", "localizers", multiple=True, type=click.Choice(localizer_names()), metavar="NAME",
-              help=f"Localizer(s) to run side by side (repeatable; default from config: knn, wknn). {describe()}.")
+@list_option("--test-walks", metavar="ID",
+             help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
+@list_option("--localizer", "localizers", choices=localizer_names(),
+             help=f"Localizer(s) to run side by side (default from config: knn, wknn). {describe()}.")
 @rerun_option
 @common_options
 def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):
@@ -29,7 +29,7 @@ def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet
                             overrides={"localizers": list(localizers) if localizers else None})
     # the maps are rasterised like export-map did (map_cfg None), unless a config file says otherwise
     map_cfg = load_stage_config("map", config_path) if config_path else None
-    walks = [w.strip() for w in test_walks.split(",") if w.strip()] if test_walks else None
+    walks = list(test_walks) or None
     with stage_viewer(rerun, workspace, "evaluate", quiet, force) as viewer, progress_display(quiet) as progress:
         report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer,
                                   force=force)

@@ -29,6 +29,21 @@ def start(verbose: int, quiet: bool) -> None:
     setup_logging(verbose, quiet)
 
 
+def list_option(*decls: str, choices: list[str] | None = None, metavar: str = "NAME", help: str = "") -> Any:
+    """A list option with one convention everywhere: repeatable and comma-separated (``--x a,b --x c`` is
+    ``(a, b, c)``), order kept, duplicates dropped, each item checked against ``choices`` when given."""
+
+    def split(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+        items = [v.strip() for raw in value for v in raw.split(",") if v.strip()]
+        bad = [v for v in items if choices is not None and v not in choices]
+        if bad:
+            raise click.BadParameter(f"{bad[0]!r} is not one of {', '.join(choices or [])}")
+        return tuple(dict.fromkeys(items))
+
+    return click.option(*decls, multiple=True, callback=split, metavar=f"{metavar}[,{metavar}...]",
+                        help=f"{help} Repeatable or comma-separated.")
+
+
 workspace_option = click.option(
     "-w", "--workspace", required=True, type=click.Path(file_okay=False),
     help="Workspace directory (created by `rmbuild ingest`).",
