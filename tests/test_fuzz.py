@@ -76,6 +76,26 @@ def test_one_bad_ilc_timestamp_is_a_clean_error(value: str, tmp_path: Path, caps
     assert r.code in (0, 2) and "internal error" not in r.err, r.err
 
 
+@pytest.mark.parametrize("digits", [20, 400])
+def test_a_huge_integer_in_a_numeric_ilc_field_names_its_line(digits: int, tmp_path: Path, capsys) -> None:
+    """make fuzz case ilc/580: a rotation-vector value of 400 nines overflowed pandas' float conversion in
+    the fast parser (OverflowError, exit 1); the line-by-line parser names the line."""
+    from cli_util import run_cli
+
+    lines = FIXTURE.read_text().split("\n")
+    i = next(k for k, ln in enumerate(lines) if "\tTYPE_ROTATION_VECTOR\t" in ln)
+    cells = lines[i].split("\t")
+    cells[5] = "9" * digits  # the accuracy flag
+    lines[i] = "\t".join(cells)
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "trace.txt").write_text("\n".join(lines))
+    r = run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws")
+    if digits > 308:  # beyond the float range: an error naming the line
+        assert r.code == 2 and f"trace.txt:{i + 1}:" in r.err and len(r.err.strip().splitlines()) == 1, r.err
+    else:
+        assert r.code in (0, 2) and "internal error" not in r.err, r.err
+
+
 def test_ingest_core_errors_name_their_file(tmp_path: Path, capsys) -> None:
     from cli_util import run_cli
     from conftest import make_input_tables, write_tables

@@ -249,7 +249,7 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
                 return None
             t_ms = df[0].to_numpy(dtype=np.int64)
             num = df[_NUM_COLS[typ]].to_numpy(dtype=np.float64)
-        except (ValueError, TypeError, pd.errors.ParserError):
+        except (ValueError, TypeError, OverflowError, pd.errors.ParserError):
             return None
         if not np.isfinite(num).all():
             return None
@@ -313,7 +313,11 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
 
 def _stream(r: _Rows, ncols: int, has_accuracy: bool) -> _Stream:
     o = np.argsort(r.t_ms, kind="stable")
-    acc = (r.num[o, ncols].astype(np.int64) if has_accuracy else np.full(len(o), -1, dtype=np.int64))
+    acc = np.full(len(o), -1, dtype=np.int64)
+    if has_accuracy:  # Android's accuracy flags are 0..3; anything else counts as unknown (-1)
+        a = r.num[o, ncols]
+        ok = np.isin(a, (0.0, 1.0, 2.0, 3.0))
+        acc[ok] = a[ok].astype(np.int64)
     return _Stream(r.t_ms[o] / 1000.0, r.num[o, :ncols], acc, r.line[o])
 
 
