@@ -306,7 +306,7 @@ def _pdr_summary(reports: dict[str, PdrReport]) -> dict:
                 "cadence_hz": round(r.cadence_hz, 3) if np.isfinite(r.cadence_hz) else None,
                 "walked_m": round(r.walked_m, 2), "heading": r.heading_source,
                 "gyro_bias_dps": round(r.gyro_bias_dps, 3), "gyro_bias_from": r.bias_source,
-                "quality": r.quality, "warnings": r.warnings}
+                "yaw_abs_not_in_front": r.yaw_abs_not_in_front, "quality": r.quality, "warnings": r.warnings}
             for w, r in reports.items()}
 
 

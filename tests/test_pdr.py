@@ -66,6 +66,23 @@ def test_carrying_modes_count_steps_and_hold_heading(mode):
     assert max(drift) <= 3.0 and np.mean(drift) <= 2.0, (mode, drift)
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_absolute_yaw_only_while_the_phone_is_held_in_front(mode):
+    """The absolute yaw is the phone's forward axis: within its noise of the walking direction when the
+    phone is held in front; at the ear, swinging or in a pocket it is 55-168° off, so it is dropped."""
+    st, hd, rng = synthetic_walk(7, n_bouts=2)
+    imu = synthesize_phone_imu(st, hd, rng, mode=mode, fs_hz=100.0, magnetic_error_rad=0.0)
+    res = run_pdr(imu, PdrConfig())
+    ya = res.poses.yaw_abs_rad[1:]
+    if mode == "texting":
+        ok = np.isfinite(ya)
+        assert ok.mean() > 0.95 and res.report.yaw_abs_not_in_front <= 0.05 * len(ya)
+        err = wrap_angle(ya[ok] - np.interp(res.poses.t_s[1:][ok], st, hd))
+        assert np.degrees(np.median(np.abs(err))) < 10.0
+    else:
+        assert np.isnan(ya).all() and res.report.yaw_abs_not_in_front >= 0.95 * len(ya)
+
+
 def test_no_steps_when_standing():
     rng = np.random.default_rng(1)
     t = np.arange(0, 20, 0.02)

@@ -112,6 +112,10 @@ def integrate_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: n
 #: (a swinging phone's yaw oscillates once per stride; a window of the step's own interval, or one stride
 #: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/formats-real.md)
 HEADING_WINDOW_PERIODS = (-1.0, 1.0)
+# deg; the absolute yaw is kept only while the phone's screen faces at most this far from up (held in front,
+# flat to pitched up: MS ILC traces 0-14°, IPIN 93 % of the samples; a phone at the ear, swinging in a hand
+# or in a pocket is upright: 79-94° on the synthetic carries)
+IN_FRONT_MAX_TILT_DEG = 70.0
 
 
 def yaw_sigma(accuracy: np.ndarray, cfg: PdrConfig) -> np.ndarray:
@@ -152,6 +156,20 @@ def _absolute_yaw(imu: ImuSignals, t0: float, step_t: np.ndarray, w0: np.ndarray
     yaw_abs = wrap_angle(np.r_[yaw0, interval_mean(imu.t_yaw_s, yaw_u, w0, w1) if k else np.zeros(0)])
     at = np.interp(np.r_[t0, step_t], imu.t_yaw_s, np.arange(len(imu.t_yaw_s)))
     return yaw_abs, yaw_sigma(np.asarray(imu.yaw_accuracy)[np.rint(at).astype(np.int64)], cfg)
+
+
+def _not_in_front(imu: ImuSignals, t0: float, w0: np.ndarray, w1: np.ndarray) -> np.ndarray:
+    """(k + 1,) true at the start and the steps where the phone is not held in front: its screen faces more
+    than IN_FRONT_MAX_TILT_DEG away from up (the mean specific force over the step's interval). The
+    absolute yaw is the azimuth of the phone's forward axis (:func:`rmbuild.pdr.heading.yaw_from_quat`),
+    which is the walking direction only for a phone held in front; at the ear, in a swinging hand or in a
+    pocket it is off by 55-168° (docs/formats-real.md)."""
+    t = np.asarray(imu.t_acc_s, dtype=np.float64)
+    a = np.asarray(imu.acc_mps2, dtype=np.float64)
+    lo, hi = np.r_[t0, w0], np.r_[min(t0 + 1.0, float(t[-1])), w1]
+    m = np.column_stack([interval_mean(t, a[:, j], lo, hi) for j in range(3)])
+    up_z = m[:, 2] / np.maximum(np.linalg.norm(m, axis=1), 1e-9)
+    return up_z < np.cos(np.deg2rad(IN_FRONT_MAX_TILT_DEG))
 
 
 def _handled_at(win: GaitWindows, t_s: np.ndarray) -> np.ndarray:
@@ -208,13 +226,17 @@ def run_pdr(imu: ImuSignals, cfg: PdrConfig) -> PdrResult:
     # while the phone is handled (waved, shaken) its yaw says nothing about a walking direction
     handled = _handled_at(det.windows, np.r_[t0, step_t])
     yaw_abs[handled], sig[handled] = np.nan, np.nan
+    aside = _not_in_front(imu, t0, step_t - period, step_t) & np.isfinite(yaw_abs)
+    yaw_abs[aside], sig[aside] = np.nan, np.nan
     turn = np.interp(step_t + period / 2, yaw.t_s, yaw.yaw_rad) - np.interp(step_t - period / 2, yaw.t_s, yaw.yaw_rad)
     length = step_lengths(step_swings(step_t, period, grid.t_s, s), turn, cfg)
     t, x, y, h = integrate_steps(t0, step_t, length, rel)
     poses = StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=yaw_abs,
                       yaw_abs_sigma_rad=sig, step_freq_hz=np.r_[np.nan, 1.0 / period],
                       step_length_m=np.r_[0.0, length])
-    return PdrResult(poses, assess(poses, det, yaw, issues, float(imu.t_acc_s[-1]) - t0))
+    rep = assess(poses, det, yaw, issues, float(imu.t_acc_s[-1]) - t0)
+    rep.yaw_abs_not_in_front = int(aside.sum())
+    return PdrResult(poses, rep)
 
 
 def poses_from_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: np.ndarray,

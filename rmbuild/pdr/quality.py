@@ -27,7 +27,8 @@ class PdrReport:
     """Per-walk PDR summary: ``steps``; ``walking_s``, ``handling_s`` (the phone handled, not carried: no
     steps counted) and ``duration_s`` (s); ``cadence_hz`` steps per walking
     second (NaN without walking); ``walked_m`` summed step length; ``heading_source``; ``gyro_bias_dps``
-    (norm of the removed bias, °/s) and ``bias_source``; ``quality``
+    (norm of the removed bias, °/s) and ``bias_source``; ``yaw_abs_not_in_front``: poses whose absolute
+    yaw was dropped because the phone was not held in front (upright or face down); ``quality``
     "ok", "suspect" or "poor"; ``warnings`` (text); ``time_issues`` (repaired timestamp problems, located
     by stream and sample index for the caller to name file and line)."""
 
@@ -40,6 +41,7 @@ class PdrReport:
     heading_source: str
     gyro_bias_dps: float
     bias_source: str
+    yaw_abs_not_in_front: int = 0
     quality: str = "ok"
     warnings: list[str] = field(default_factory=list)
     time_issues: list[TimeIssue] = field(default_factory=list)
