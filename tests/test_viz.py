@@ -79,6 +79,16 @@ def test_view_defaults_to_save_without_display(ws_full: Path, tmp_path: Path, ca
     assert (ws / "view.rrd").is_file()
 
 
+def test_spawn_without_a_display_is_a_one_line_error(ws_full: Path, capsys, monkeypatch) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("rmbuild.viz.rerun_bridge.sys.platform", "linux")
+    for args in (["view", "-w", ws_full, "--spawn"], ["evaluate", "-w", ws_full, "--rerun", "spawn", "--force"]):
+        r = run_cli(capsys, *args)
+        assert r.code == 2 and len(r.err.strip().splitlines()) == 1, r.err
+        assert "--spawn needs a display" in r.err and "--save" in r.err
+
+
 def test_view_ingest_only_workspace(tmp_path: Path, capsys) -> None:
     ws = build_workspace(tmp_path, stages=())
     r = run_cli(capsys, "view", "-w", ws, "--save", tmp_path / "v.rrd")

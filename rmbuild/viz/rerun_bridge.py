@@ -73,6 +73,22 @@ RAW = "raw"
 PLOTS = "plots"
 MAP = "map"
 
+def _spawn(rec) -> None:
+    """Open (or connect to) the native viewer on rerun's default port (9876); a one-line error when there is
+    no display or no viewer executable (rerun's own message spans many lines)."""
+    from rmbuild.errors import InputError
+
+    if not has_display():
+        raise InputError("--spawn needs a display (neither DISPLAY nor WAYLAND_DISPLAY is set): use --save "
+                         "FILE.rrd and open it elsewhere, or --serve for the web viewer")
+    try:
+        with _env(XDG_CONFIG_HOME=str(_private_rerun_config()), TELEMETRY_ENABLED="false"):
+            rec.spawn()
+    except RuntimeError as e:
+        raise InputError(f"the rerun viewer could not be started ({str(e).splitlines()[0][:200]}): "
+                         "use --save FILE.rrd or --serve") from None
+
+
 def has_display() -> bool:
     """True when a native window can be opened (X11/Wayland on Linux; always on macOS and Windows)."""
     if sys.platform in ("darwin", "win32"):
@@ -234,8 +250,7 @@ class RerunViewer:
             self._tmp_path = Path(tmp)
             self.rec.save(self._tmp_path)
         elif target.mode == "spawn":
-            with _env(XDG_CONFIG_HOME=str(_private_rerun_config()), TELEMETRY_ENABLED="false"):
-                self.rec.spawn()  # rerun's default viewer port (9876); connects to a running viewer
+            _spawn(self.rec)
         else:  # serve: gRPC server + web viewer, both on localhost
             with _env(XDG_CONFIG_HOME=str(_private_rerun_config()), TELEMETRY_ENABLED="false"):
                 uri = self.rec.serve_grpc(grpc_port=target.port + 1)
