@@ -212,3 +212,21 @@ def test_sparse_wifi_gives_unlinked_walks_not_a_crash(tiny_input: Path, tmp_path
         assert not walks["linked"].all()  # 3 % of the readings cannot link every walk
     if not walks["linked"].all():  # sparse evidence: unlinked walks, and a warning that names them
         assert "not linked" in r.err or "disconnected" in r.err
+    if drop > 0.95:  # unlinked walks are marked wherever poses go
+        _unlinked_walks_are_marked(tmp_path / "ws", walks, capsys)
+
+
+def _unlinked_walks_are_marked(ws_dir: Path, walks: pd.DataFrame, capsys) -> None:
+    from rmbuild.viz.rerun_bridge import rrd_entities
+
+    ws = Workspace.open(ws_dir)
+    tum = pd.read_csv(ws.path("optimize.tum_index"), dtype={"walk_id": str})
+    linked = dict(zip(walks["walk_id"].astype(str), walks["linked"].astype(bool), strict=True))
+    assert dict(zip(tum["walk_id"], tum["linked"].astype(bool), strict=True)) == linked
+    n_unlinked = sum(not v for v in linked.values())
+    assert run_cli(capsys, "report", "-w", ws_dir).code == 0
+    assert f"{n_unlinked} walk(s) not linked to the map are not drawn" in (ws_dir / "report.html").read_text()
+    assert run_cli(capsys, "view", "-w", ws_dir, "--save", ws_dir / "v.rrd").code == 0
+    ents = rrd_entities(ws_dir / "v.rrd")
+    assert sum(e.startswith("/floor/optimized_unlinked/") and e.count("/") == 3 for e in ents) == n_unlinked
+    assert sum(e.startswith("/floor/optimized/") and e.count("/") == 3 for e in ents) == len(linked) - n_unlinked

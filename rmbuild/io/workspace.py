@@ -212,15 +212,19 @@ class StageWriter:
         """The resolved config of this run, written next to the outputs."""
         self.path(f"{STAGE_DIRS[self.stage]}.config").write_text(toml_text)
 
-    def per_walk_texts(self, dir_key: str, index_key: str, texts: dict[str, str], suffix: str) -> None:
+    def per_walk_texts(self, dir_key: str, index_key: str, texts: dict[str, str], suffix: str,
+                       columns: dict[str, dict[str, Any]] | None = None) -> None:
         """One text file per walk in directory ``dir_key``, named by :func:`walk_file_names`; the table
-        ``index_key`` (walk_id, file) writes the mapping down."""
+        ``index_key`` (walk_id, file, then each of ``columns``: name -> {walk_id: value}) writes the
+        mapping down."""
         folder = self.path(dir_key)
         folder.mkdir(parents=True, exist_ok=True)
         names = walk_file_names(texts)
         for wid, text in texts.items():
             (folder / f"{names[wid]}{suffix}").write_text(text)
         index = pd.DataFrame({"walk_id": list(names), "file": [f"{n}{suffix}" for n in names.values()]})
+        for col, values in (columns or {}).items():
+            index[col] = [values.get(w) for w in names]
         index.to_csv(self.path(index_key), index=False)
 
 

@@ -112,8 +112,10 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         w.table("optimize.walks", result.walks)
         w.table("optimize.history", pd.DataFrame({"iteration": np.arange(len(result.cost_history)),
                                                   "cost": result.cost_history}))
+        placed = result.poses.groupby("walk_id", sort=False)["linked"].first()  # placed in the map's frame
         w.per_walk_texts("optimize.tum_dir", "optimize.tum_index",
-                         {str(wid): tum_text(g) for wid, g in result.poses.groupby("walk_id", sort=False)}, ".txt")
+                         {str(wid): tum_text(g) for wid, g in result.poses.groupby("walk_id", sort=False)}, ".txt",
+                         columns={"linked": {str(k): bool(v) for k, v in placed.items()}})
         if anchor_table is not None:
             w.table("optimize.anchors", anchor_table)
         w.config(to_toml(cfg, "optimize"))

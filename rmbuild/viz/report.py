@@ -191,10 +191,14 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
         panels.append(("before: raw PDR, each walk fitted to the truth on its own (SE(2))", raw_aligned))
     else:
         panels.append(("before: raw PDR, each walk in its own frame", ds.poses))
+    unplaced = 0
     if opt is not None:
         shown = opt.copy()
+        if "linked" in shown:  # an unlinked walk's frame is arbitrary: not drawn with the placed ones
+            unplaced = int(shown.loc[~shown["linked"].astype(bool), "walk_id"].nunique())
+            shown = shown[shown["linked"].astype(bool)]
         if rt is not None:
-            xy = apply(rt, opt[["x_m", "y_m"]].to_numpy(dtype=float))
+            xy = apply(rt, shown[["x_m", "y_m"]].to_numpy(dtype=float))
             shown["x_m"], shown["y_m"] = xy[:, 0], xy[:, 1]
             title = "after: optimised, one SE(2) for all walks into the building frame"
         else:
@@ -205,8 +209,11 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     plan_frame_ok = ds.truth_poses is not None or gauge in BUILDING_FRAME_GAUGES
     fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses,
                                walls=walls if (plan_frame_ok or opt is None) else None)
-    figs = [ReportFigure("walks", "Walks before and after optimisation", _png(fig),
-                         "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan.")]
+    caption = "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan."
+    if unplaced:
+        caption += (f" After: {unplaced} walk(s) not linked to the map are not drawn (their frame is arbitrary;"
+                    " optimize/walks.parquet names them).")
+    figs = [ReportFigure("walks", "Walks before and after optimisation", _png(fig), caption)]
     if ws.has("optimize") and ws.exists("optimize.history"):
         h = ws.read_table("optimize.history")
         if "cost" in h and len(h):

@@ -10,6 +10,7 @@ Entity tree (``floor`` and ``raw`` carry a static y-flip so that +y points up in
     floor/truth/<walk>                    true path (static) + .../pos: the current step (timeline "step")
     floor/optimized/<walk>, .../pos       optimised path in the common frame
     floor/initial/<walk>                  initial guess of the optimiser
+    floor/{optimized,initial}_unlinked/<walk>  walks not linked to the map (arbitrary frame; not in the layout)
     (floor/{optimized,initial,vicinity,map} carry the optimiser-frame -> building-frame transform when
     the truth is known and the gauge is free: see RerunViewer.log_alignment)
     floor/vicinity                        vicinity factors (a sample), coloured by final error
@@ -335,9 +336,12 @@ class RerunViewer:
             self._count("truth_walks")
 
     def log_optimized(self, poses: pd.DataFrame, kind: str = "optimized") -> None:
-        """Poses in the common frame (``kind`` "optimized" or "initial"): ``floor/<kind>/<walk>``."""
+        """Poses in the common frame (``kind`` "optimized" or "initial"): ``floor/<kind>/<walk>``; a walk
+        not linked to the map (``linked`` false) under ``floor/<kind>_unlinked/<walk>``, which the default
+        layout does not show (its frame is arbitrary)."""
         for wid, g in _walk_groups(poses):
-            path = f"{FLOOR}/{kind}/{entity_part(wid)}"
+            placed = "linked" not in g or bool(g["linked"].iloc[0])
+            path = f"{FLOOR}/{kind if placed else kind + '_unlinked'}/{entity_part(wid)}"
             if kind == "optimized":
                 self._log_walk(path, wid, g)
             else:  # the initial guess: path only, no per-step point
