@@ -392,6 +392,11 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     }
     if reports:
         summary["pdr"] = _pdr_summary(reports)
+    no_wifi = sorted(set(ds.walks["walk_id"].astype(str)) - set(ds.wifi["walk_id"].astype(str)))
+    if no_wifi:
+        summary["warnings"].append(
+            f"{len(no_wifi)} walk(s) without Wi-Fi readings kept without radio evidence (placed only by session "
+            f"continuity or anchors, else unlinked): {', '.join(no_wifi[:5])}{' ...' if len(no_wifi) > 5 else ''}")
     if dropped_walks:
         summary["warnings"].append(f"{len(dropped_walks)} walk(s) without poses dropped: {dropped_walks[:5]}")
     if len(one_step):

@@ -123,10 +123,8 @@ def test_malformed_imui(tmp_path):
 def test_file_without_wifi_or_imu(tmp_path):
     lines = PHONE.read_text(encoding="utf-8").splitlines()
     p = write(tmp_path, [ln for ln in lines if not ln.startswith("WIFI;")], "nowifi.txt")
-    with pytest.raises(InputError, match="no WIFI lines") as e:
-        read([p])
-    assert e.value.where == str(p)
-    assert len(read([p], PdrConfig(ipin=IpinConfig(require_wifi=False))).wifi) == 0
+    raw = read([p])  # kept as a walk without radio evidence; the note names the file
+    assert len(raw.wifi) == 0 and len(raw.poses) > 0 and f"{p}: no WIFI lines" in raw.notes
     p = write(tmp_path, [ln for ln in lines if not ln.startswith(("ACCE;", "GYRO;", "AHRS;"))], "noimu.txt")
     with pytest.raises(InputError, match="no ACCE"):
         read([p])

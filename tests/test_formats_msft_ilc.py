@@ -152,14 +152,13 @@ def test_bad_rotation_vector(tmp_path):
 def test_file_without_wifi_or_imu(tmp_path):
     lines = fixture_lines()
     no_wifi = write(tmp_path, [ln for ln in lines if "\tTYPE_WIFI\t" not in ln], "nowifi.txt")
-    with pytest.raises(InputError, match="no usable Wi-Fi") as e:
-        read([no_wifi])
-    assert e.value.where == str(no_wifi)
-    ok = read([no_wifi], PdrConfig(msft_ilc=MsftIlcConfig(require_wifi=False)))
+    ok = read([no_wifi])  # kept as a walk without radio evidence; the note names the file
     assert len(ok.wifi) == 0 and len(ok.poses) == 21
+    assert f"{no_wifi}: no usable Wi-Fi readings (no TYPE_WIFI lines)" in ok.notes
     no_acc = write(tmp_path, [ln for ln in lines if "\tTYPE_ACCELEROMETER\t" not in ln], "noacc.txt")
     with pytest.raises(InputError, match="no TYPE_ACCELEROMETER") as e:
         read([no_acc])
+    assert e.value.where == str(no_acc)
     no_rot = write(tmp_path, [ln for ln in lines if "\tTYPE_ROTATION_VECTOR\t" not in ln], "norot.txt")
     with pytest.raises(InputError, match="no rotation-vector / AHRS samples"):
         read([no_rot], PdrConfig(heading_source="rotation_vector"))
@@ -196,6 +195,18 @@ def test_sniff_is_specific(tmp_path):
     assert any("companion" in n for n in raw.notes)
     with pytest.raises(InputError, match="mixed formats"):
         read([FIXTURE, ipin])
+
+
+def test_a_trace_without_wifi_among_others_is_kept_and_named(tmp_path, capsys):
+    from cli_util import run_cli
+
+    lines = fixture_lines()
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "with_wifi.txt").write_text("\n".join(lines))
+    (tmp_path / "in" / "no_wifi.txt").write_text("\n".join(ln for ln in lines if "\tTYPE_WIFI\t" not in ln))
+    r = run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws")
+    assert r.code == 0, r.err
+    assert "1 walk(s) without Wi-Fi readings kept without radio evidence" in r.err and "no_wifi" in r.err
 
 
 def test_duplicate_walk_ids(tmp_path):

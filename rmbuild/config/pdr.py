@@ -20,8 +20,6 @@ class MsftIlcConfig:
     # s; a TYPE_WIFI row whose last-seen time is older than its scan time by more than this is a stale
     # cache entry and is dropped (on the MS ILC floors 3 s drops 55-60 % of the rows).
     max_wifi_age_s: float = bounded(3.0, 0.0, 3600.0)
-    # a trace without any (fresh) Wi-Fi row is an input error (false: keep the walk, Wi-Fi-less).
-    require_wifi: bool = True
 
     def validate(self) -> None:
         check_ranges(self, "msft_ilc.")
@@ -43,8 +41,6 @@ class IpinConfig:
     # poses) from the IMUI covariance (upper triangle of the 4x4 covariance of dx, dy, dz, dtheta, row by
     # row; variances in m² and rad² assumed), for an optional data-driven odometry noise.
     imui_covariance: bool = False
-    # a logfile without any WIFI line is an input error (false: keep the walk, Wi-Fi-less).
-    require_wifi: bool = True
 
     def validate(self) -> None:
         if (self.origin_lat_deg is None) != (self.origin_lon_deg is None):

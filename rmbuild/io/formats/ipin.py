@@ -326,9 +326,8 @@ class IpinReader(Reader):
                     raise InputError("no ACCE (or IMUI) lines: cannot derive steps (no IMU data)", str(f))
                 imu[lg.walk_id] = raw_imu(lg)
             w = lg.num["WIFI"]
-            if len(w) == 0 and opts.ipin.require_wifi:
-                raise InputError("no WIFI lines; pdr.ipin.require_wifi = false keeps Wi-Fi-less walks",
-                                 str(f))
+            if len(w) == 0:  # kept: a walk without radio evidence (ingest warns, naming it)
+                notes.append(f"{f}: no WIFI lines")
             wifi.append(pd.DataFrame({
                 "walk_id": pd.Series([lg.walk_id] * len(w), dtype=object), "t_s": w[:, 0] if len(w) else [],
                 "bssid": pd.Series([b for _, b in lg.wifi_text], dtype=object),

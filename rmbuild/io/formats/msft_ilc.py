@@ -446,10 +446,9 @@ class MsftIlcReader(Reader):
             seen[tr.walk_id] = f
             if len(tr.acc.t_s) < 2:
                 raise InputError("no TYPE_ACCELEROMETER lines: cannot derive steps (no IMU data)", str(f))
-            if len(tr.wifi) == 0 and opts.msft_ilc.require_wifi:
-                why = "every row stale" if tr.n_wifi_stale else "no TYPE_WIFI lines"
-                raise InputError(f"no usable Wi-Fi readings ({why}); pdr.msft_ilc.require_wifi = false keeps "
-                                 "Wi-Fi-less walks", str(f))
+            if len(tr.wifi) == 0:  # kept: a walk without radio evidence (ingest warns, naming it)
+                why = "every TYPE_WIFI row stale" if tr.n_wifi_stale else "no TYPE_WIFI lines"
+                notes.append(f"{f}: no usable Wi-Fi readings ({why})")
             imu[tr.walk_id] = raw_imu(tr, f)
             wifi.append(tr.wifi)
             wifi_lines.append(tr.wifi_lines)
