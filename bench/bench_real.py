@@ -176,8 +176,13 @@ def need_table(ws: Path, key: str) -> pd.DataFrame:
 
 
 def read_report(ws: Path, stage: str) -> dict:
-    p = ws / "reports" / f"{stage}.json"
-    return json.loads(p.read_text()) if p.is_file() else {}
+    """The stage's report where this rmbuild's workspace keeps it (or where earlier versions did)."""
+    from rmbuild.io.workspace import Workspace
+
+    for p in (Workspace(ws).report_path(stage), ws / "reports" / f"{stage}.json"):
+        if p.is_file():
+            return json.loads(p.read_text())
+    return {}
 
 
 def linked_walks(walks: pd.DataFrame | None, poses: pd.DataFrame) -> set[str]:
@@ -408,7 +413,7 @@ NOTES = """
   `rmbuild evaluate`/`optimize` score it. Raw: raw PDR poses, fit on all walks' waypoints. Optimised: the
   optimised poses, fit on the **linked** walks' waypoints only (an unlinked walk's frame is arbitrary).
   *All walks (unlinked at raw)*: linked walks' optimised errors together with unlinked walks' raw errors — the
-  way "never worse than raw" is judged. *rmbuild's report*: `reports/optimize.json` as written (there, unlinked
+  way "never worse than raw" is judged. *rmbuild's report*: the optimize report as written (there, unlinked
   walks count where the optimiser left them). *Worse than raw*: linked walks whose mean waypoint error after
   optimisation exceeds their raw one (in brackets: linked walks above 10 m).
 - **kNN**: median localisation error of `evaluate`'s kNN on its held-out walks with the map built from the
