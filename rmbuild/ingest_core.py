@@ -96,8 +96,9 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
     wp, ww, wf = _where(raw, "poses"), _where(raw, "wifi"), _where(raw, "fixes")
     if len(poses) == 0:
         raise InputError("no poses in the input")
-    if len(wifi) == 0:
-        raise InputError("no Wi-Fi readings in the input")
+    if len(wifi) == 0:  # every walk without Wi-Fi: name the first walk's source
+        first = next(iter(raw.imu.values())).source if raw.imu else wp(0)
+        raise InputError("no Wi-Fi readings in any input file: nothing to build a radio map from", first)
     for c in ("t_s", "x_m", "y_m", "heading_rad"):
         v = poses[c].to_numpy(dtype=np.float64)
         if not np.isfinite(v).all():
