@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 
+import click
 import numpy as np
 import pandas as pd
 import pytest
@@ -205,5 +206,8 @@ def test_registry_classes_and_cli_choices():
         assert localizer_class(name).name == name
         assert make_localizer(name) is not None
     opt = next(p for p in evaluate.params if p.name == "localizers")
-    assert list(opt.type.choices) == localizer_names()
+    # the choices come from the registry: every registered name is accepted (comma-separated too), others not
+    assert opt.callback(None, opt, (",".join(localizer_names()),)) == tuple(localizer_names())
+    with pytest.raises(click.BadParameter):
+        opt.callback(None, opt, ("knn,not_a_localizer",))
     assert all(n in opt.help for n in REGISTRY)
