@@ -216,6 +216,19 @@ def test_report_and_recordings_are_not_overwritten_without_force(optimized: Path
     assert rrd.read_bytes() != b"precious"
 
 
+def test_every_file_gets_the_mode_of_a_new_file(optimized: Path) -> None:
+    """Atomic writes go through mkstemp (0600); the files they leave follow the umask like any new file."""
+    import os
+    import stat
+
+    mask = os.umask(0)
+    os.umask(mask)
+    modes = {p.relative_to(optimized).as_posix(): stat.S_IMODE(p.stat().st_mode)
+             for p in optimized.rglob("*") if p.is_file()}
+    assert "manifest.json" in modes and any(k.endswith("report.json") for k in modes)
+    assert {k: oct(m) for k, m in modes.items() if m != 0o666 & ~mask} == {}
+
+
 def test_workspace_file_names_live_in_one_module() -> None:
     """Paths into a workspace are built only by rmbuild/io/workspace.py (simulate writes input files)."""
     import re

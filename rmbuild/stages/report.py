@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
 import time
 from pathlib import Path
 
@@ -36,9 +35,7 @@ def _write(ws: Workspace, out: Path, png_dir: Path, heatmap_top_n: int) -> dict:
     report = build_report(ws, heatmap_top_n=heatmap_top_n)
     for f in report.figures:
         write_bytes_atomic(png_dir / f"{f.name}.png", f.png)
-        _readable(png_dir / f"{f.name}.png")
     write_text_atomic(out, report.html)
-    _readable(out)
     return {
         "stage": "report",
         "path": str(out),
@@ -48,10 +45,3 @@ def _write(ws: Workspace, out: Path, png_dir: Path, heatmap_top_n: int) -> dict:
         "bytes": len(report.html.encode("utf-8")),
         "time_s": round(time.perf_counter() - t0, 3),
     }
-
-
-def _readable(path: Path) -> None:
-    """Atomic writes create 0600 files; a report is meant to be shared: apply the usual umask instead."""
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(path, 0o666 & ~mask)
