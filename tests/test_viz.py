@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 from typing import Protocol
@@ -77,6 +78,9 @@ def test_view_defaults_to_save_without_display(ws_full: Path, tmp_path: Path, ca
     r = run_cli(capsys, "view", "-w", ws)
     assert r.code == 0, r.err
     assert (ws / "view.rrd").is_file()
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (ws / "view.rrd").stat().st_mode & 0o777 == 0o666 & ~mask  # like any new file, not mkstemp's 0600
 
 
 def test_spawn_without_a_display_is_a_one_line_error(ws_full: Path, capsys, monkeypatch) -> None:
