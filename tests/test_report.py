@@ -47,6 +47,17 @@ def test_report_is_self_contained(ws_report: Path, tmp_path: Path, capsys) -> No
     assert "src=\"http" not in page and "href=\"http" not in page  # nothing fetched from outside
     for needle in ("Key figures", "Configuration used", "[optimize]", "optimised ATE rmse"):
         assert needle in page
+    assert "dashed grey: ground truth" in page  # the synthetic venue has true paths: the caption says so
+
+
+def test_captions_name_only_what_is_drawn(tmp_path: Path, capsys) -> None:
+    from conftest import make_input_tables, write_tables
+
+    assert run_cli(capsys, "ingest", write_tables(make_input_tables(n_walks=3, n_steps=40), tmp_path / "in"),
+                   "-w", tmp_path / "ws", "-q").code == 0
+    assert run_cli(capsys, "report", "-w", tmp_path / "ws").code == 0
+    page = (tmp_path / "ws" / "report.html").read_text()
+    assert "no true paths to draw" in page and "ground truth;" not in page and "floor plan" not in page
 
 
 def test_report_ingest_only_and_out_option(tmp_path: Path, capsys) -> None:

@@ -207,9 +207,11 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
     plan_frame_ok = ds.truth_poses is not None or gauge in BUILDING_FRAME_GAUGES
-    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses,
-                               walls=walls if (plan_frame_ok or opt is None) else None)
-    caption = "Coloured: one colour per walk; dashed grey: ground truth; dark lines: floor plan."
+    drawn_walls = walls if (plan_frame_ok or opt is None) else None
+    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls)
+    caption = "Coloured: one colour per walk"  # and only what is drawn
+    caption += "; dashed grey: ground truth" if ds.truth_poses is not None else " (no true paths to draw)"
+    caption += "; dark lines: floor plan." if drawn_walls is not None else "."
     if unplaced:
         caption += (f" After: {unplaced} walk(s) not linked to the map are not drawn (their frame is arbitrary;"
                     " optimize/walks.parquet names them).")
