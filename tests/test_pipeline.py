@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from cli_util import run_cli
@@ -96,6 +97,20 @@ def test_bad_cell_size_writes_nothing(tiny_ws: Path, capsys) -> None:
     r = run_cli(capsys, "export-map", "-w", tiny_ws / "ws", "--cell-size", "0")
     assert r.code == 2 and "cell_size_m" in r.err and len(r.err.strip().splitlines()) == 1
     assert sorted(p.name for p in (tiny_ws / "ws" / "map").iterdir()) == before
+
+
+def test_true_paths_are_written_as_tum_beside_the_estimates(tiny_ws: Path) -> None:
+    """For `evo_ape tum optimize/tum/truth/<walk>.txt optimize/tum/<walk>.txt -a`: same file names, same
+    timestamps (true poses are at the walks' step times)."""
+    ws = Workspace.open(tiny_ws / "ws")
+    est = pd.read_csv(ws.path("optimize.tum_index"), dtype={"walk_id": str})
+    tru = pd.read_csv(ws.path("optimize.tum_truth_index"), dtype={"walk_id": str})
+    assert list(tru["walk_id"]) == list(est["walk_id"]) and list(tru["file"]) == list(est["file"])
+    for f in est["file"]:
+        a = np.loadtxt(ws.path("optimize.tum_dir") / f)
+        b = np.loadtxt(ws.path("optimize.tum_truth_dir") / f)
+        assert a.shape == b.shape and a.shape[1] == 8 and np.array_equal(a[:, 0], b[:, 0])
+        assert np.allclose(np.hypot(b[:, 6], b[:, 7]), 1.0)  # unit quaternions (qz, qw)
 
 
 def test_unknown_localizer_and_test_walk(tiny_ws: Path, capsys) -> None:

@@ -5,7 +5,8 @@ Layout (one directory per project; every table is Parquet)::
     WORKSPACE/
       manifest.json            the workspace marker: format "rmbuild-workspace", schema version, creation
       data/                    ingest: walks, poses, wifi (with node), fixes, fingerprints, truth/
-      optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv)
+      optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv;
+                               tum/truth/*.txt: the true paths, same file names, when the input had them)
       map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures
       evaluate/                per-scan errors, CDF plot
       <stage dir>/report.json  the stage's machine-readable summary
@@ -90,6 +91,8 @@ ARTEFACTS: dict[str, str] = {
     "optimize.history": "optimize/history.parquet",
     "optimize.tum_dir": "optimize/tum",
     "optimize.tum_index": "optimize/tum/walks.csv",
+    "optimize.tum_truth_dir": "optimize/tum/truth",
+    "optimize.tum_truth_index": "optimize/tum/truth/walks.csv",
     "optimize.anchors": "optimize/anchors.parquet",
     # map
     "map.cells": "map/radiomap.parquet",

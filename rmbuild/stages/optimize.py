@@ -116,6 +116,10 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         w.per_walk_texts("optimize.tum_dir", "optimize.tum_index",
                          {str(wid): tum_text(g) for wid, g in result.poses.groupby("walk_id", sort=False)}, ".txt",
                          columns={"linked": {str(k): bool(v) for k, v in placed.items()}})
+        if ds.truth_poses is not None and len(ds.truth_poses):  # for `evo_ape tum TRUTH ESTIMATE -a`
+            truth = ds.truth_poses.groupby(ds.truth_poses["walk_id"].astype(str), sort=False)
+            w.per_walk_texts("optimize.tum_truth_dir", "optimize.tum_truth_index",
+                             {wid: tum_text(g) for wid, g in truth}, ".txt")
         if anchor_table is not None:
             w.table("optimize.anchors", anchor_table)
         w.config(to_toml(cfg, "optimize"))
