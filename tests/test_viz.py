@@ -182,6 +182,23 @@ def test_bridge_radiomap_tracks_and_live_hooks(tmp_path: Path) -> None:
     assert "/plots/eval/xi/slac" in ents
 
 
+@pytest.mark.parametrize("t0, kind", [(1.5e9, "timestamp"), (0.0, "duration")])
+def test_walk_times_are_a_timestamp_when_absolute(t0: float, kind: str, tmp_path: Path) -> None:
+    """Epoch seconds (MS ILC, IPIN) show as dates in the viewer, not as a 47-year duration."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    poses = pd.DataFrame({"walk_id": "w", "step": np.arange(5), "t_s": t0 + 0.5 * np.arange(5),
+                          "x_m": np.arange(5.0), "y_m": np.zeros(5), "heading_rad": np.zeros(5)})
+    with open_viewer(ViewTarget("save", tmp_path / "t.rrd")) as v:
+        v.log_raw_walks(poses)
+    types = {rb.schema.field("t_s").type for c in RrdReader(tmp_path / "t.rrd").stream()
+             if "t_s" in (rb := c.to_record_batch()).schema.names}
+    assert len(types) == 1
+    t = types.pop()
+    assert pa.types.is_timestamp(t) if kind == "timestamp" else pa.types.is_duration(t), t
+
+
 def test_interrupted_save_leaves_no_recording(tmp_path: Path) -> None:
     path = tmp_path / "x.rrd"
     with pytest.raises(RuntimeError), open_viewer(ViewTarget("save", path)) as v:

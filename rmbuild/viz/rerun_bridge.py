@@ -61,8 +61,10 @@ APPLICATION_ID = "rmbuild"
 # ------------------------------------------------------------------ timelines
 #: step index within a walk (sequence)
 TIMELINE_STEP = "step"
-#: step time of the walk (duration, s)
+#: step time of the walk: a timestamp when the times are epoch seconds (MS ILC, IPIN), else a duration (s)
 TIMELINE_TIME = "t_s"
+#: s; times above this (2001-09-09) are taken as seconds since the Unix epoch
+EPOCH_TIME_MIN_S = 1e9
 #: optimiser iteration (sequence)
 TIMELINE_ITERATION = "iteration"
 #: scan index of a test walk in the evaluation (sequence)
@@ -242,6 +244,7 @@ class RerunViewer:
         self._tmp_path: Path | None = None
         self._closed = False
         self.counts: dict[str, int] = {}
+        self._time_kind: str | None = None
         self.rec = self.rr.RecordingStream(APPLICATION_ID, make_default=False)
         if target.mode == "save":
             assert target.path is not None
@@ -319,7 +322,10 @@ class RerunViewer:
         steps = g["step"].to_numpy(dtype=np.int64)[ok] if "step" in g else np.arange(len(g))[ok]
         indexes = [rr.TimeColumn(TIMELINE_STEP, sequence=steps)]
         if "t_s" in g:
-            indexes.append(rr.TimeColumn(TIMELINE_TIME, duration=g["t_s"].to_numpy(dtype=np.float64)[ok]))
+            t = g["t_s"].to_numpy(dtype=np.float64)[ok]
+            if self._time_kind is None:  # one kind per recording: a timeline has one type
+                self._time_kind = "timestamp" if float(np.median(t)) > EPOCH_TIME_MIN_S else "duration"
+            indexes.append(rr.TimeColumn(TIMELINE_TIME, **{self._time_kind: t}))
         self.rec.log(f"{path}/pos", rr.Points2D.from_fields(colors=[color], radii=[radius]), static=True)
         self.rec.send_columns(f"{path}/pos", indexes=indexes, columns=rr.Points2D.columns(positions=xy[ok]))
 
