@@ -99,6 +99,14 @@ def test_bad_cell_size_writes_nothing(tiny_ws: Path, capsys) -> None:
     assert sorted(p.name for p in (tiny_ws / "ws" / "map").iterdir()) == before
 
 
+def test_cost_history_says_which_solve_each_iteration_belongs_to(tiny_ws: Path) -> None:
+    ws = Workspace.open(tiny_ws / "ws")
+    h = ws.read_table("optimize.history")
+    rep = json.loads(ws.report_path("optimize").read_text())
+    assert h["solve"].iloc[0] == 0 and (np.diff(h["solve"].to_numpy()) >= 0).all()
+    assert h["solve"].max() + 1 == rep["solves"] and len(h) == len(rep["cost_history"])
+
+
 def test_true_paths_are_written_as_tum_beside_the_estimates(tiny_ws: Path) -> None:
     """For `evo_ape tum optimize/tum/truth/<walk>.txt optimize/tum/<walk>.txt -a`: same file names, same
     timestamps (true poses are at the walks' step times)."""

@@ -54,6 +54,7 @@ class OptimizeResult:
     ``candidates``: every pair the search produced (before verification), with ``used`` and ``injected``.
     ``walks``: per walk (:func:`rmbuild.slam.report.walk_table`).
     ``placement_log``: one row per walk-to-map fit the placement tried (phase, round, walk, accepted, ...).
+    ``solve_starts``: index into ``cost_history`` of each solve's first entry.
     ``stats``: factor counts, costs, iterations, time_s per phase, cost_history, warnings, ... (JSON-able).
     """
 
@@ -65,6 +66,7 @@ class OptimizeResult:
     stats: dict
     cost_history: list[float] = field(default_factory=list)
     placement_log: pd.DataFrame = field(default_factory=pd.DataFrame)
+    solve_starts: list[int] = field(default_factory=list)
 
 
 def optimize(
@@ -141,7 +143,7 @@ def optimize(
         poses=walks.poses_frame(dataset.poses, final_xyt).assign(linked=in_map),
         initial_poses=walks.poses_frame(dataset.poses, init_xyt).assign(linked=in_map),
         pairs=pairs, candidates=cand, walks=walks_df, stats=stats, cost_history=outcome.cost_history,
-        placement_log=pd.DataFrame(placement.log),
+        placement_log=pd.DataFrame(placement.log), solve_starts=outcome.solve_starts,
     )
 
 

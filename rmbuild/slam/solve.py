@@ -56,6 +56,9 @@ class SolveOutcome:
     scale_rounds: int = 0
     n_odometry: int = 0
     cost_history: list[float] = field(default_factory=list)
+    # index into cost_history of each solve's first entry (a new solve's graph has other factors: its
+    # cost jumps, which is not divergence)
+    solve_starts: list[int] = field(default_factory=list)
     final_cost: float = 0.0
     initial_cost: float = 0.0
     first_solve_initial_cost: float | None = None
@@ -147,6 +150,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
         state = SolveState(current, settling.copy(), placement, graph.kf_idx)
         out.settling_used = state.settling
         g = graph.build([f for s in sources for f in s.factors(state)])
+        out.solve_starts.append(len(out.cost_history))
         if out.first_solve_initial_cost is None:
             out.first_solve_initial_cost = float(g.error(values))
             out.cost_history.append(out.first_solve_initial_cost)

@@ -110,8 +110,11 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         w.table("optimize.initial_poses", result.initial_poses)
         w.table("optimize.pairs", result.pairs)
         w.table("optimize.walks", result.walks)
+        solve = np.zeros(len(result.cost_history), dtype=np.int64)  # which solve each cost belongs to
+        for start in result.solve_starts[1:]:
+            solve[start:] += 1
         w.table("optimize.history", pd.DataFrame({"iteration": np.arange(len(result.cost_history)),
-                                                  "cost": result.cost_history}))
+                                                  "cost": result.cost_history, "solve": solve}))
         placed = result.poses.groupby("walk_id", sort=False)["linked"].first()  # placed in the map's frame
         w.per_walk_texts("optimize.tum_dir", "optimize.tum_index",
                          {str(wid): tum_text(g) for wid, g in result.poses.groupby("walk_id", sort=False)}, ".txt",

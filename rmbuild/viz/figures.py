@@ -145,12 +145,21 @@ def cdf_figure(errors: dict[str, np.ndarray], title: str = "localization error")
     return fig
 
 
-def cost_figure(cost: np.ndarray):
-    """The optimiser's cost per iteration (log scale when positive)."""
+def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None):
+    """The optimiser's cost per iteration (log scale when positive); with ``solve`` (the solve of each
+    iteration) each solve is its own line and a dotted line marks where the next one starts."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.0, 3.2))
     c = np.asarray(cost, dtype=float)
-    ax.plot(np.arange(c.size), c, marker="o", ms=3)
+    sv = np.zeros(c.size, dtype=np.int64) if solve is None else np.asarray(solve, dtype=np.int64)
+    for k in np.unique(sv):
+        idx = np.flatnonzero(sv == k)
+        ax.plot(idx, c[idx], marker="o", ms=3, color="C0")
+        if k > sv.min():
+            ax.axvline(idx[0] - 0.5, color="0.5", ls=":", lw=1)
+    if sv.size and sv.max() > sv.min():
+        ax.text(0.99, 0.97, f"{sv.max() - sv.min() + 1} solves (dotted: a new solve, new factors)",
+                transform=ax.transAxes, ha="right", va="top", fontsize=8, color="0.3")
     if c.size and np.all(c[np.isfinite(c)] > 0):
         ax.set_yscale("log")
     ax.set_xlabel("iteration")

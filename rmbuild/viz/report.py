@@ -219,8 +219,11 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     if ws.has("optimize") and ws.exists("optimize.history"):
         h = ws.read_table("optimize.history")
         if "cost" in h and len(h):
-            figs.append(ReportFigure("cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy())),
-                                     "Cost after each Levenberg-Marquardt iteration (all outer loops)."))
+            solve = h["solve"].to_numpy() if "solve" in h else None
+            figs.append(ReportFigure(
+                "cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy(), solve)),
+                "Cost after each Levenberg-Marquardt iteration of every solve; a dotted line starts the next solve, "
+                "whose graph has other factors (re-selected pairs, rescaled odometry), so its cost jumps."))
     return figs, rt
 
 
