@@ -60,6 +60,10 @@ def test_map_outputs(tiny_ws: Path) -> None:
     assert waps and ((wide[waps] == 100) | (wide[waps] <= 0)).all().all()
     side = ws.read_json("map.sidecar")
     assert side["frame"].startswith("walk:") and side["grid"]["cell_size_m"] == 2.0
+    aps = pd.read_csv(ws.path("map.wide_csv_aps"), dtype=str)  # WAPnnn -> BSSID beside the CSV
+    assert list(aps["column"]) == waps and aps["bssid"].str.len().min() > 0
+    assert dict(zip(aps["column"], aps["bssid"], strict=True)) == side["ap_columns"]
+    assert set(wide["FLOOR"]) == {0} and set(wide["BUILDINGID"]) == {0}
     for key in ("map.coverage_png", "map.heatmaps_png"):
         assert ws.path(key).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     hist = ws.read_table("map.histograms")  # the RSS-histogram layer, by walking direction

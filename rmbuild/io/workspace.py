@@ -98,6 +98,7 @@ ARTEFACTS: dict[str, str] = {
     "map.cells": "map/radiomap.parquet",
     "map.nodes": "map/reference_nodes.parquet",
     "map.wide_csv": "map/radiomap_uji.csv",
+    "map.wide_csv_aps": "map/radiomap_uji_aps.csv",
     "map.sidecar": "map/radiomap.json",
     "map.histograms": "map/histograms.parquet",
     "map.coverage_png": "map/coverage.png",

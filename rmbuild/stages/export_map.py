@@ -60,6 +60,8 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         w.table("map.cells", rm.long_table())
         w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
         rm.wide_table("uji").to_csv(w.path("map.wide_csv"), index=False)
+        pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
+            w.path("map.wide_csv_aps"), index=False)  # WAPnnn -> BSSID, for tools that read the CSV alone
         if rm.histograms is not None:
             w.table("map.histograms", rm.histograms.long_table(rm.bssids, rm.cells))
         side = rm.sidecar()
