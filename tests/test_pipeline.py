@@ -132,6 +132,15 @@ def test_unknown_localizer_and_test_walk(tiny_ws: Path, capsys) -> None:
     assert r.code == 2 and "unknown walk 'nope'" in r.err
 
 
+def test_quiet_keeps_only_warnings_and_errors(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    shutil.copytree(tiny_ws / "ws", tmp_path / "ws")
+    for args in (["optimize", "--force"], ["export-map", "--force"], ["evaluate", "--force"],
+                 ["report", "--force"]):
+        r = run_cli(capsys, *args, "-w", tmp_path / "ws", "-q")
+        assert r.code == 0, r.err
+        assert r.out == "" and all(ln.startswith("WARNING: ") for ln in r.err.splitlines() if ln.strip()), args
+
+
 def test_list_options_are_repeatable_and_comma_separated(tiny_ws: Path, tmp_path: Path, capsys) -> None:
     shutil.copytree(tiny_ws / "ws", tmp_path / "ws")
     walks = sorted(Workspace.open(tmp_path / "ws").read_table("data.walks")["walk_id"].astype(str))

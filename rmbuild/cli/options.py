@@ -14,7 +14,8 @@ from rmbuild.cli import setup_logging
 def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """--config, --force, --quiet, -v; sets up logging before the command body runs."""
     f = click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")(f)
-    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress or tables.")(f)
+    f = click.option("-q", "--quiet", is_flag=True,
+                     help="No progress, tables or summaries: only warnings and errors.")(f)
     f = click.option("--force", is_flag=True,
                      help="Replace this stage's existing outputs (for ingest: the workspace) and an existing "
                           "--rerun recording.")(f)

@@ -14,7 +14,7 @@ from rmbuild.cli.options import start, workspace_option
 @click.option("--top-aps", type=click.IntRange(1, 24), default=6, show_default=True,
               help="Heat maps of this many strongest APs.")
 @click.option("--force", is_flag=True, help="Replace an existing report (the HTML file and its PNGs).")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.option("-q", "--quiet", is_flag=True, help="No summary: only warnings and errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
 def report(workspace, out, top_aps, force, quiet, verbose):
     """Write a one-page self-contained HTML report of WORKSPACE (figures, key figures, configs)."""

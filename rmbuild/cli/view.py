@@ -42,7 +42,7 @@ def rerun_target(value: str | None, workspace: str | Path, stage: str):
 @click.option("--port", type=int, default=9090, show_default=True,
               help="Web viewer port for --serve (its gRPC server uses PORT+1).")
 @click.option("--force", is_flag=True, help="Replace an existing recording file.")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.option("-q", "--quiet", is_flag=True, help="No summary: only warnings and errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
 def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
     """Log what WORKSPACE holds (walks, optimisation, radio map, evaluation) to the rerun viewer."""
