@@ -15,11 +15,12 @@ from rmbuild.pdr.core import (
     poses_from_increments,
     run_pdr,
 )
-from rmbuild.pdr.heading import rotation_vector_quat, wrap_angle, yaw_from_azimuth_deg, yaw_from_quat
+from rmbuild.pdr.heading import accuracy_flags, rotation_vector_quat, wrap_angle, yaw_from_azimuth_deg, yaw_from_quat
 from rmbuild.pdr.quality import PdrReport
 from rmbuild.pdr.timebase import ImuTimeError, TimeIssue
 
 __all__ = [
+    "accuracy_flags",
     "ImuSignals",
     "ImuTimeError",
     "PdrReport",

@@ -43,6 +43,16 @@ def yaw_from_quat(q: np.ndarray) -> np.ndarray:
     return np.arctan2(r11 - r12, r01 - r02)
 
 
+def accuracy_flags(values: np.ndarray) -> np.ndarray:
+    """Android accuracy flags (0-3) as int64 from a numeric column; anything else (-1, NaN, a hostile 1e20)
+    is -1, unknown."""
+    v = np.asarray(values, dtype=np.float64)
+    out = np.full(v.shape, -1, dtype=np.int64)
+    ok = np.isin(v, (0.0, 1.0, 2.0, 3.0))
+    out[ok] = v[ok].astype(np.int64)
+    return out
+
+
 def yaw_from_azimuth_deg(azimuth_deg: np.ndarray) -> np.ndarray:
     """ENU yaw in rad from a compass azimuth in degrees (clockwise from north)."""
     return wrap_angle(np.pi / 2 - np.deg2rad(np.asarray(azimuth_deg, dtype=np.float64)))

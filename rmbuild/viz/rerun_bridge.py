@@ -658,9 +658,9 @@ def _move_into_place(src: Path, dst: Path) -> None:
     """Move ``src`` to ``dst`` so that ``dst`` is never half written (copy beside it, then rename); ``dst``
     gets the mode of any new file (``src`` came from mkstemp: 0600)."""
     dst.parent.mkdir(parents=True, exist_ok=True)
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(src, 0o666 & ~mask)
+    from rmbuild.io.atomic import new_file_mode
+
+    os.chmod(src, new_file_mode())
     try:
         os.replace(src, dst)
         return

@@ -25,7 +25,14 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
-from rmbuild.pdr import ImuSignals, poses_from_increments, rotation_vector_quat, yaw_from_azimuth_deg, yaw_from_quat
+from rmbuild.pdr import (
+    ImuSignals,
+    accuracy_flags,
+    poses_from_increments,
+    rotation_vector_quat,
+    yaw_from_azimuth_deg,
+    yaw_from_quat,
+)
 
 FORMAT_NAME = "ipin"
 #: tag -> number of ';'-separated fields including the tag (WIFI: at least; the SSID may contain ';')
@@ -258,7 +265,7 @@ def raw_imu(log: _Log) -> RawImu:
             yaw = yaw_from_quat(quat)
         else:   # no rotation vector recorded: the app's yaw, a compass azimuth in degrees
             yaw = yaw_from_azimuth_deg(ahrs[:, 4])
-        accuracy = ahrs[:, 8].astype(np.int64)
+        accuracy = accuracy_flags(ahrs[:, 8])
     else:
         yaw, accuracy = np.zeros(0), np.zeros(0, dtype=np.int64)
     signals = ImuSignals(

@@ -26,7 +26,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
-from rmbuild.pdr import ImuSignals, rotation_vector_quat, yaw_from_quat
+from rmbuild.pdr import ImuSignals, accuracy_flags, rotation_vector_quat, yaw_from_quat
 
 FORMAT_NAME = "msft-ilc"
 #: files that sit beside the traces in the published layout; ignored (with a note) when passed in
@@ -313,11 +313,7 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
 
 def _stream(r: _Rows, ncols: int, has_accuracy: bool) -> _Stream:
     o = np.argsort(r.t_ms, kind="stable")
-    acc = np.full(len(o), -1, dtype=np.int64)
-    if has_accuracy:  # Android's accuracy flags are 0..3; anything else counts as unknown (-1)
-        a = r.num[o, ncols]
-        ok = np.isin(a, (0.0, 1.0, 2.0, 3.0))
-        acc[ok] = a[ok].astype(np.int64)
+    acc = accuracy_flags(r.num[o, ncols]) if has_accuracy else np.full(len(o), -1, dtype=np.int64)
     return _Stream(r.t_ms[o] / 1000.0, r.num[o, :ncols], acc, r.line[o])
 
 
