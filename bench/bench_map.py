@@ -18,6 +18,7 @@ import numpy as np
 from bench.common import peak_rss_mb, write_result
 from rmbuild.config.evaluate import KnnConfig
 from rmbuild.config.radiomap import MapConfig
+from rmbuild.viz.figures import coverage_figure, heatmaps_figure
 
 
 def _dataset(preset: str, seed: int):
@@ -63,7 +64,7 @@ def main(preset: str = "large", seed: int = 7, k: int = 15, n_single: int = 300)
     long, wide, side = rm.long_table(), rm.wide_table(), rm.sidecar()
     times["tables"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    figs = [rm.coverage_figure(venue), rm.heatmaps_figure(walls=venue)]
+    figs = [coverage_figure(rm.cells, rm.cell_size_m, venue), heatmaps_figure(long, cfg.heatmap_top_n, venue)]
     times["figures_build"] = time.perf_counter() - t0
     tmp = Path(tempfile.mkdtemp(prefix="rmbuild-bench-map-"))
     try:

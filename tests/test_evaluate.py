@@ -147,6 +147,8 @@ def test_se2_gauge_is_one_transform():
 def test_full_result_json_table_and_cdf():
     from matplotlib.figure import Figure
 
+    from rmbuild.viz.figures import cdf_figure
+
     ds = make_dataset(n_walks=6)
     truth = ds.truth_poses[["x_m", "y_m"]].to_numpy()
     rng = np.random.default_rng(1)
@@ -167,7 +169,11 @@ def test_full_result_json_table_and_cdf():
     assert len(origins) == 1
     assert "knn" in j["consistency"]["built"]
     assert "surveyed" in res.table() and "raw" in res.table()
-    assert isinstance(res.cdf_figure(), Figure)
+    fig = cdf_figure(res.errors_by_label())
+    assert isinstance(fig, Figure)
+    lines = fig.axes[0].get_lines()  # ecdf curves (+ the 5 m / 10 m marks): one per map and localizer
+    assert sum(ln.get_label().startswith(("built", "surveyed", "raw")) for ln in lines) == 6
+    assert list(res.errors_by_label())[:2] == ["built / knn", "built / wknn"]
 
 
 def test_no_truth_path():

@@ -156,13 +156,21 @@ def test_fill_flags_interpolated_cells(method):
 def test_figures():
     from matplotlib.figure import Figure
 
+    from rmbuild.viz.figures import coverage_figure, heatmaps_figure
+
     wifi, xy, walk = _field_data()
     rm = build_radio_map(wifi, xy, walk, MapConfig(cell_size_m=1.0, heatmap_top_n=4))
     walls = np.array([[0, 0, 12, 0], [0, 0, 0, 12]], dtype=float)
-    assert isinstance(rm.coverage_figure(walls), Figure)
-    fig = rm.heatmaps_figure(walls={"walls": walls.tolist()})
+    assert isinstance(coverage_figure(rm.cells, rm.cell_size_m, walls), Figure)
+    long = rm.long_table()
+    long.loc[long.index[0], "rssi_mean_dbm"] = -13.0  # a strong peak: the colour scale reaches it, unclipped
+    fig = heatmaps_figure(long, 4, walls={"walls": walls.tolist()}, cell_size_m=rm.cell_size_m)
     assert isinstance(fig, Figure)
-    assert sum(ax.has_data() for ax in fig.axes) >= 4
+    panels = [ax for ax in fig.axes if ax.images]
+    assert len(panels) == 4 and all(ax.get_xlabel() in ("x (m)", "") for ax in panels)
+    lo, hi = panels[0].images[0].get_clim()
+    assert hi == -13.0 and lo == pytest.approx(long[long["bssid"].isin(
+        long.groupby("bssid")["rssi_mean_dbm"].max().nlargest(4).index)]["rssi_mean_dbm"].min())
     assert rm.strongest_aps(2) == rm.strongest_aps(5)[:2]
 
 

@@ -220,3 +220,27 @@ def test_vicinity_labels_name_the_anisotropic_pairs(tmp_path: Path) -> None:
         assert v.log_vicinity(pairs, node_xy) == 3
     (ent,) = [e for p, e in logged if p.endswith("/vicinity")]
     assert ent.labels.pa_array.to_pylist() == ["cross anisotropic e=0.1", "cross e=0.5", "within anisotropic e=0.2"]
+
+
+def test_walks_placed_on_their_waypoints_without_truth() -> None:
+    """Real data has waypoints, not true paths: the report fits each raw walk (and the optimised map) to
+    them, so both panels are in the building frame and the waypoints can be drawn."""
+    from rmbuild.viz.align import frame_to_fixes, per_walk_to_fixes, poses_at_fixes
+
+    t = np.arange(20.0)
+    local = np.c_[t * 0.7, np.sin(t / 3.0) * 2]
+    a, shift = 0.6, np.array([30.0, -4.0])
+    r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    building = local @ r.T + shift
+    poses = pd.DataFrame({"walk_id": "w", "t_s": t, "x_m": local[:, 0], "y_m": local[:, 1]})
+    ft = np.array([0.0, 6.5, 13.0, 19.0, 40.0])  # the last one is long after the walk: not used
+    fx = np.c_[np.interp(ft, t, building[:, 0]), np.interp(ft, t, building[:, 1])]
+    fixes = pd.DataFrame({"walk_id": "w", "t_s": ft, "x_m": fx[:, 0], "y_m": fx[:, 1]})
+    assert np.isnan(poses_at_fixes(poses, fixes)[-1]).all()
+    placed = per_walk_to_fixes(poses, fixes)
+    assert placed is not None
+    np.testing.assert_allclose(placed[["x_m", "y_m"]].to_numpy(), building, atol=0.05)
+    rt = frame_to_fixes(poses, fixes)
+    assert rt is not None and np.allclose(rt[0], r, atol=1e-3) and np.allclose(rt[1], shift, atol=0.05)
+    assert frame_to_fixes(poses, fixes, "anchors") is None  # already in the building frame
+    assert per_walk_to_fixes(poses, fixes.iloc[:1]) is None  # one waypoint cannot fix a rotation

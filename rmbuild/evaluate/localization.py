@@ -244,35 +244,9 @@ class EvalResult:
             lines.append(f"not computed: {what}: {why}")
         return "\n".join(lines)
 
-    def cdf_figure(self):
-        """Figure: empirical CDF of the per-scan errors, every map (colour) and localizer (line style)."""
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(7, 4.5), layout="constrained")
-        ax = fig.subplots()
-        colours = {"built": "C0", "surveyed": "C2", "raw": "C3"}
-        styles = ["-", "--", ":", "-."]
-        locs = list(self.localizers)
-        for m, d in self.errors.items():
-            for loc, e in d.items():
-                e = np.sort(e[np.isfinite(e)])
-                if e.size == 0:
-                    continue
-                y = np.arange(1, e.size + 1) / e.size
-                ax.step(e, y, where="post", color=colours.get(m, None),
-                        ls=styles[locs.index(loc) % len(styles)] if loc in locs else "-",
-                        label=f"{m} / {loc} (median {np.median(e):.1f} m)")
-        for x in (5, 10):
-            ax.axvline(x, color="0.8", lw=0.8, zorder=0)
-        ax.set_xlabel("position error [m]")
-        ax.set_ylabel("fraction of test scans")
-        ax.set_ylim(0, 1)
-        ax.set_xlim(left=0)
-        ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="lower right")
-        ax.set_title(f"localization error CDF (gauge: {self.gauge}, {len(self.test_walks)} test walks)")
-        return fig
+    def errors_by_label(self) -> dict[str, np.ndarray]:
+        """Per "map / localizer" the per-scan errors (m), maps in :data:`MAP_NAMES` order."""
+        return {f"{m} / {loc}": e for m in MAP_NAMES for loc, e in self.errors.get(m, {}).items()}
 
 
 def evaluate(

@@ -178,19 +178,6 @@ class RadioMap:
             "config_toml": to_toml(self.config, "map"),
         }
 
-    # ------------------------------------------------------------ figures
-    def coverage_figure(self, walls=None):
-        """Figure: scans per cell (log colour when >= 20), interpolated cells hatched; optional walls overlay."""
-        from rmbuild.radiomap.figures import coverage_figure
-
-        return coverage_figure(self, walls)
-
-    def heatmaps_figure(self, top_n: int | None = None, walls=None):
-        """Figure: mean RSSI per cell of the ``top_n`` strongest APs (by peak cell mean), one panel each."""
-        from rmbuild.radiomap.figures import heatmaps_figure
-
-        return heatmaps_figure(self, self.config.heatmap_top_n if top_n is None else top_n, walls)
-
     def strongest_aps(self, top_n: int) -> list[int]:
         """Column indices of the ``top_n`` APs with the highest peak cell mean (ties: AP order)."""
         peak = np.where(np.isnan(self.mean_dbm), -np.inf, self.mean_dbm).max(axis=0, initial=-np.inf)

@@ -13,6 +13,7 @@ from rmbuild.io.workspace import Workspace
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions
 from rmbuild.stages.view import log_workspace
+from rmbuild.viz.figures import cdf_figure
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 
@@ -81,10 +82,8 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
         w.table("evaluate.tracks", tracks)
         if len(tracks):
             w.table("evaluate.errors", tracks[["map", "localizer", "walk_id", "t_s", "error_m"]])
-        import matplotlib
-
-        matplotlib.use("Agg")
-        w.figure("evaluate.cdf_png", res.cdf_figure())
+        w.figure("evaluate.cdf_png", cdf_figure(res.errors_by_label(), "localization error CDF (gauge: "
+                                                f"{res.gauge}, {len(res.test_walks)} test walks)"))
         w.config(to_toml(cfg, "evaluate") + "\n" + to_toml(map_cfg, "map"))
         w.report = report
     log_workspace(ws, viewer)

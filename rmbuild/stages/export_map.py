@@ -14,6 +14,7 @@ from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
 from rmbuild.stages.view import log_workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
+from rmbuild.viz.figures import coverage_figure, heatmaps_figure
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 
@@ -57,7 +58,8 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     node_pos = pd.DataFrame({"node": rm.nodes.node, "walk": rm.node_walk, "x_m": rm.node_xy[:, 0],
                              "y_m": rm.node_xy[:, 1]})
     with ws.writing("map") as w:
-        w.table("map.cells", rm.long_table())
+        long = rm.long_table()
+        w.table("map.cells", long)
         w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
         rm.wide_table("uji").to_csv(w.path("map.wide_csv"), index=False)
         pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
@@ -67,11 +69,8 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         side = rm.sidecar()
         side["frame_info"] = info
         w.json("map.sidecar", side)
-        import matplotlib
-
-        matplotlib.use("Agg")
-        w.figure("map.coverage_png", rm.coverage_figure(walls=walls))
-        w.figure("map.heatmaps_png", rm.heatmaps_figure(walls=walls))
+        w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
+        w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
         w.config(to_toml(cfg, "map"))
         report = {
             "stage": "export-map",

@@ -52,3 +52,66 @@ def per_walk_to_truth(poses: pd.DataFrame, truth: pd.DataFrame | None) -> pd.Dat
             xy[m] = apply(align_se2(src_all[ok], dst_all[ok]), src_all[m])
     out["x_m"], out["y_m"] = xy[:, 0], xy[:, 1]
     return out
+
+
+#: A waypoint / fix this far (s) outside a walk's pose times is still matched to its nearest pose (the
+#: first step is often detected a moment after the walker leaves the first waypoint).
+FIX_TIME_SLACK_S = 2.0
+
+
+def poses_at_fixes(poses: pd.DataFrame, fixes: pd.DataFrame) -> np.ndarray:
+    """float (n_fixes, 2): each fix's walk position (m, the poses' frame) linearly interpolated at the fix
+    time; NaN when the walk has no poses within :data:`FIX_TIME_SLACK_S` of it."""
+    out = np.full((len(fixes), 2), np.nan)
+    fw = fixes["walk_id"].astype(str).to_numpy()
+    ft = fixes["t_s"].to_numpy(dtype=np.float64)
+    for w, g in poses.groupby(poses["walk_id"].astype(str), sort=False):
+        m = fw == w
+        if not m.any():
+            continue
+        g = g.sort_values("t_s")
+        t = g["t_s"].to_numpy(dtype=np.float64)
+        ok = m & (ft >= t[0] - FIX_TIME_SLACK_S) & (ft <= t[-1] + FIX_TIME_SLACK_S)
+        for k, c in enumerate(("x_m", "y_m")):
+            out[ok, k] = np.interp(ft[ok], t, g[c].to_numpy(dtype=np.float64))
+    return out
+
+
+def frame_to_fixes(poses: pd.DataFrame, fixes: pd.DataFrame | None, gauge: str | None = None
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R, t) with building ≈ R @ map + t, fitted on the fixes (waypoints) of all ``poses``' walks (pass
+    only walks in one frame); None with fewer than 3 usable fixes or a building-frame gauge."""
+    if fixes is None or len(fixes) == 0 or gauge in BUILDING_FRAME_GAUGES:
+        return None
+    src = poses_at_fixes(poses, fixes)
+    dst = fixes[["x_m", "y_m"]].to_numpy(dtype=np.float64)
+    ok = np.isfinite(src).all(axis=1) & np.isfinite(dst).all(axis=1)
+    if ok.sum() < 3:
+        return None
+    r, t = align_se2(src[ok], dst[ok])
+    return np.asarray(r), np.asarray(t)
+
+
+def per_walk_to_fixes(poses: pd.DataFrame, fixes: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The walks with at least two fixes, each aligned to its own fixes by one SE(2) fit (how raw PDR looks
+    at best); None when no walk has two."""
+    if fixes is None or len(fixes) == 0:
+        return None
+    src = poses_at_fixes(poses, fixes)
+    dst = fixes[["x_m", "y_m"]].to_numpy(dtype=np.float64)
+    fw = fixes["walk_id"].astype(str).to_numpy()
+    ok = np.isfinite(src).all(axis=1) & np.isfinite(dst).all(axis=1)
+    walk = poses["walk_id"].astype(str).to_numpy()
+    xy = poses[["x_m", "y_m"]].to_numpy(dtype=np.float64).copy()
+    keep = np.zeros(len(poses), dtype=bool)
+    for w in dict.fromkeys(walk):
+        m = ok & (fw == w)
+        if m.sum() >= 2:
+            pm = walk == w
+            xy[pm] = apply(align_se2(src[m], dst[m]), xy[pm])
+            keep |= pm
+    if not keep.any():
+        return None
+    out = poses.loc[keep].copy()
+    out["x_m"], out["y_m"] = xy[keep, 0], xy[keep, 1]
+    return out

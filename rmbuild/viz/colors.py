@@ -1,8 +1,17 @@
-"""Colours shared by the rerun bridge and the report figures (numpy only, no rerun, no matplotlib)."""
+"""Colours shared by the rerun bridge and the report figures (no rerun here).
+
+Colour maps come from :data:`matplotlib.colormaps`, so the viewer and the PNGs use the same ones.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+
+#: The one sequential colour map of every scalar picture (RSSI, scans per cell), in the PNGs and the
+#: viewer: perceptually uniform and readable in grey and by colour-blind readers.
+SEQUENTIAL_CMAP = "viridis"
+#: Errors (low is good): green -> yellow -> red.
+ERROR_CMAP = "RdYlGn_r"
 
 #: Qualitative palette (RGB 0-255), one colour per walk in walk order, cycled (Tableau 20 order).
 WALK_PALETTE = np.array([
@@ -12,16 +21,6 @@ WALK_PALETTE = np.array([
     (196, 156, 148), (247, 182, 210), (199, 199, 199), (219, 219, 141), (158, 218, 229),
 ], dtype=np.uint8)
 
-#: Viridis sampled at 9 points (RGB 0-255); :func:`colormap` interpolates between them.
-_VIRIDIS = np.array([
-    (68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
-    (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37),
-], dtype=np.float64)
-
-#: Green -> yellow -> red, for errors (low is good).
-_TRAFFIC = np.array([(26, 152, 80), (145, 207, 96), (254, 224, 139), (252, 141, 89), (215, 48, 39)],
-                    dtype=np.float64)
-
 
 def walk_color(i: int) -> tuple[int, int, int]:
     """RGB of the i-th walk (walk order of the workspace)."""
@@ -29,26 +28,23 @@ def walk_color(i: int) -> tuple[int, int, int]:
     return int(c[0]), int(c[1]), int(c[2])
 
 
-def _ramp(table: np.ndarray, t: np.ndarray) -> np.ndarray:
-    t = np.clip(np.nan_to_num(np.asarray(t, dtype=np.float64), nan=0.0), 0.0, 1.0)
-    pos = t * (len(table) - 1)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, len(table) - 1)
-    f = (pos - lo)[..., None]
-    return (table[lo] * (1 - f) + table[hi] * f).round().astype(np.uint8)
+def _rgba(name: str, t: np.ndarray) -> np.ndarray:
+    import matplotlib
+
+    return np.asarray(matplotlib.colormaps[name](np.clip(t, 0.0, 1.0), bytes=True), dtype=np.uint8)
 
 
 def colormap(values: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
-    """RGBA uint8 (..., 4) of ``values`` on viridis over [vmin, vmax]; NaN -> fully transparent."""
+    """RGBA uint8 (..., 4) of ``values`` on :data:`SEQUENTIAL_CMAP` over [vmin, vmax]; NaN -> transparent."""
     v = np.asarray(values, dtype=np.float64)
     span = vmax - vmin if vmax > vmin else 1.0
-    rgb = _ramp(_VIRIDIS, (v - vmin) / span)
-    alpha = np.where(np.isfinite(v), 255, 0).astype(np.uint8)
-    return np.concatenate([rgb, alpha[..., None]], axis=-1)
+    out = _rgba(SEQUENTIAL_CMAP, np.nan_to_num((v - vmin) / span, nan=0.0))
+    out[..., 3] = np.where(np.isfinite(v), 255, 0)
+    return out
 
 
 def error_colors(err: np.ndarray, scale: float) -> np.ndarray:
-    """RGB uint8 (n, 3): green (0) -> red (>= ``scale``); NaN counts as the worst."""
+    """RGB uint8 (n, 3) on :data:`ERROR_CMAP`: green (0) -> red (>= ``scale``); NaN counts as the worst."""
     e = np.asarray(err, dtype=np.float64)
     e = np.where(np.isfinite(e), e, scale)
-    return _ramp(_TRAFFIC, e / (scale if scale > 0 else 1.0))
+    return _rgba(ERROR_CMAP, e / (scale if scale > 0 else 1.0))[..., :3]

@@ -1,22 +1,42 @@
-"""matplotlib figures of the report (Agg backend; each function returns a Figure, the caller saves it)."""
+"""Every matplotlib figure rmbuild writes: the export-map pictures, evaluate's CDF and the report's figures.
+
+One heat-map renderer (:func:`heatmaps_figure`, also behind :func:`coverage_figure`) and one CDF renderer
+(:func:`cdf_figure`), so a picture of the same thing looks the same wherever it appears. Each function
+builds a :class:`matplotlib.figure.Figure` directly (no pyplot state, no display needed) with constrained
+layout (titles and colour bars are never cut off) and returns it; the caller saves it. Every axis carries
+a label with its unit. Colour limits come from the data drawn (a -13 dBm peak shows as -13 dBm).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from rmbuild.viz.colors import walk_color
+from rmbuild.viz.colors import SEQUENTIAL_CMAP, walk_color
+
+#: Line style of each map in a CDF (colour tells the localizer): built solid, surveyed dashed, raw dotted.
+MAP_LINE_STYLES = {"built": "-", "surveyed": "--", "raw": ":"}
+#: Error marks drawn on CDFs (m): the 5 m / 10 m thresholds the evaluate table reports (<5m, <10m).
+CDF_MARKS_M = (5.0, 10.0)
+#: Scans-per-cell colour bars switch to a log scale from this many scans (a few busy cells would flatten
+#: a linear scale).
+LOG_COUNT_FROM = 20
+_XY_LABELS = ("x (m)", "y (m)")
 
 
-def _plt():
+def _figure(width_in: float, height_in: float) -> Any:
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width_in, height_in), layout="constrained")
+
+
+def _cmap() -> Any:
     import matplotlib
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    return matplotlib.colormaps[SEQUENTIAL_CMAP]
 
 
 def _rgb(i: int) -> tuple[float, float, float]:
@@ -24,132 +44,246 @@ def _rgb(i: int) -> tuple[float, float, float]:
     return r / 255, g / 255, b / 255
 
 
-def _walls(ax, walls: np.ndarray | None) -> None:
+def walls_array(walls: Any) -> np.ndarray | None:
+    """Wall segments as float (n, 4) x0, y0, x1, y1 (m) from an array-like or a venue dict with "walls";
+    None when there are none."""
+    if walls is None:
+        return None
+    if isinstance(walls, dict):
+        walls = walls.get("walls")
+        if walls is None:
+            return None
+    a = np.asarray(walls, dtype=float).reshape(-1, 4) if len(walls) else np.zeros((0, 4))
+    return a if len(a) else None
+
+
+def _walls(ax: Any, walls: np.ndarray | None, color: str = "0.25") -> None:
     if walls is None or len(walls) == 0:
         return
     from matplotlib.collections import LineCollection
 
-    ax.add_collection(LineCollection(list(walls.reshape(-1, 2, 2)), colors="0.35", linewidths=1.2, zorder=1))
+    ax.add_collection(LineCollection(list(walls.reshape(-1, 2, 2)), colors=color, linewidths=0.9, zorder=2))
 
 
-def _paths(ax, poses: pd.DataFrame, order: dict[str, int], **kw) -> None:
-    for wid, g in poses.groupby("walk_id", sort=False):
-        ax.plot(g["x_m"], g["y_m"], color=_rgb(order.get(str(wid), 0)), lw=1.1, zorder=3, **kw)
+def _xy_axes(ax: Any, left: bool = True, bottom: bool = True) -> None:
+    ax.set_aspect("equal")
+    if bottom:
+        ax.set_xlabel(_XY_LABELS[0])
+    if left:
+        ax.set_ylabel(_XY_LABELS[1])
+    ax.tick_params(labelsize=7)
 
 
-def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequence[str],
-                 truth: pd.DataFrame | None = None, walls: np.ndarray | None = None):
-    """One panel per (title, poses) — poses with walk_id, x_m, y_m in the frame of ``walls``/``truth`` —
-    over the floor plan (walls (n, 4) m) and the true paths (thin grey) when known; one colour per walk."""
-    plt = _plt()
-    order = {str(w): i for i, w in enumerate(walk_order)}
-    fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 5.2), squeeze=False)
-    for ax, (title, poses) in zip(axes[0], panels):
-        _walls(ax, walls)
-        if truth is not None:
-            for _, g in truth.groupby("walk_id", sort=False):
-                ax.plot(g["x_m"], g["y_m"], color="0.6", lw=0.7, ls="--", zorder=2)
-        _paths(ax, poses, order)
-        ax.set_title(title, fontsize=10)
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.grid(alpha=0.2)
-    if len(walk_order) <= 12:
-        from matplotlib.lines import Line2D
-
-        handles = [Line2D([], [], color=_rgb(i), label=str(w)) for i, w in enumerate(walk_order)]
-        if truth is not None:
-            handles.append(Line2D([], [], color="0.6", ls="--", label="truth"))
-        fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
-        fig.subplots_adjust(bottom=0.2)
-    fig.tight_layout(rect=(0, 0.08 if len(walk_order) <= 12 else 0, 1, 1))
-    return fig
-
-
-def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls_map_frame: np.ndarray | None = None,
-                    cell_size_m: float | None = None):
-    """Mean RSSI per cell of the ``top_n`` APs with the highest peak cell mean, one panel each.
-
-    ``cells``: the radio map's long table (ix, iy, x_m, y_m, bssid, rssi_mean_dbm, ...); x_m, y_m are cell
-    centres in the map frame; ``walls_map_frame`` (n, 4) m in that frame. Returns None without data.
-    """
-    if cells is None or len(cells) == 0 or not {"bssid", "rssi_mean_dbm", "x_m", "y_m"} <= set(cells.columns):
-        return None
-    plt = _plt()
-    peak = cells.groupby("bssid")["rssi_mean_dbm"].max().sort_values(ascending=False, kind="stable")
-    aps = list(peak.index[:top_n])
-    if not aps:
-        return None
-    s = cell_size_m or _cell_size(cells)
-    x_all, y_all = cells["x_m"].to_numpy(dtype=float), cells["y_m"].to_numpy(dtype=float)
-    x0, y0 = np.nanmin(x_all) - s / 2, np.nanmin(y_all) - s / 2
-    nx = int(round((np.nanmax(x_all) + s / 2 - x0) / s))
-    ny = int(round((np.nanmax(y_all) + s / 2 - y0) / s))
-    ncol = min(3, len(aps))
-    nrow = int(np.ceil(len(aps) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.9 * nrow), squeeze=False)
-    im = None
-    for ax, ap in zip(axes.flat, aps):
-        g = cells[cells["bssid"] == ap]
-        img = np.full((ny, nx), np.nan)
-        c = np.clip(((g["x_m"].to_numpy(dtype=float) - x0) / s).astype(int), 0, nx - 1)
-        r = np.clip(((g["y_m"].to_numpy(dtype=float) - y0) / s).astype(int), 0, ny - 1)
-        img[r, c] = g["rssi_mean_dbm"].to_numpy(dtype=float)
-        im = ax.imshow(img, origin="lower", extent=(x0, x0 + nx * s, y0, y0 + ny * s), cmap="viridis",
-                       vmin=-100, vmax=-30, interpolation="nearest", zorder=0)
-        _walls(ax, walls_map_frame)
-        ax.set_title(f"{ap}  (peak {peak[ap]:.0f} dBm)", fontsize=9)
-        ax.set_aspect("equal")
-        ax.set_xlim(x0, x0 + nx * s)
-        ax.set_ylim(y0, y0 + ny * s)
-        ax.tick_params(labelsize=7)
-    for ax in list(axes.flat)[len(aps):]:
-        ax.axis("off")
-    fig.tight_layout()
-    if im is not None:
-        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="mean RSSI (dBm)")
-    return fig
-
-
+# ------------------------------------------------------------------ grids
 def _cell_size(cells: pd.DataFrame) -> float:
-    if "ix" in cells and cells["ix"].nunique() > 1:
-        d = cells.drop_duplicates("ix").sort_values("ix")
-        dx = np.diff(d["x_m"].to_numpy(dtype=float)) / np.diff(d["ix"].to_numpy(dtype=float))
-        dx = dx[np.isfinite(dx) & (dx > 0)]
-        if dx.size:
-            return float(np.median(dx))
+    """The grid step (m) of a cell table with ix and x_m (1 m when it cannot be told)."""
+    for i, c in (("ix", "x_m"), ("iy", "y_m")):
+        d = cells.drop_duplicates(i)
+        if len(d) > 1:
+            di = np.diff(d.sort_values(i)[i].to_numpy(dtype=float))
+            dx = np.diff(d.sort_values(i)[c].to_numpy(dtype=float))
+            s = dx / di
+            s = s[np.isfinite(s) & (s > 0)]
+            if s.size:
+                return float(np.median(s))
     return 1.0
 
 
-def cdf_figure(errors: dict[str, np.ndarray], title: str = "localization error"):
-    """Empirical CDFs of position errors (m), one curve per label ("map / localizer")."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7.5, 4.6))
-    styles = {"built": "-", "surveyed": "--", "raw": ":"}
-    for i, (label, e) in enumerate(errors.items()):
-        e = np.sort(np.asarray(e, dtype=float)[np.isfinite(e)])
+class Grid:
+    """The raster of a cell table (ix, iy, x_m, y_m: cell index and centre in the map frame, m)."""
+
+    def __init__(self, cells: pd.DataFrame, cell_size_m: float | None = None):
+        self.s = float(cell_size_m or _cell_size(cells))
+        ix = cells["ix"].to_numpy(dtype=np.int64)
+        iy = cells["iy"].to_numpy(dtype=np.int64)
+        self.ix0, self.iy0 = int(ix.min()), int(iy.min())
+        self.shape = (int(iy.max()) - self.iy0 + 1, int(ix.max()) - self.ix0 + 1)
+        # cell centre = origin + (i + 0.5) * s: the origin from any row
+        ox = float(np.median(cells["x_m"].to_numpy(dtype=float) - (ix + 0.5) * self.s))
+        oy = float(np.median(cells["y_m"].to_numpy(dtype=float) - (iy + 0.5) * self.s))
+        self.extent = (ox + self.ix0 * self.s, ox + (self.ix0 + self.shape[1]) * self.s,
+                       oy + self.iy0 * self.s, oy + (self.iy0 + self.shape[0]) * self.s)
+
+    def image(self, cells: pd.DataFrame, values: np.ndarray) -> np.ndarray:
+        """float (rows, cols) image: ``values`` at the cells' (iy, ix), NaN elsewhere."""
+        img = np.full(self.shape, np.nan)
+        img[cells["iy"].to_numpy(dtype=np.int64) - self.iy0, cells["ix"].to_numpy(dtype=np.int64) - self.ix0] = values
+        return img
+
+
+def _draw_grid(ax: Any, grid: Grid, img: np.ndarray, norm: Any, walls: np.ndarray | None,
+               fixes_xy: np.ndarray | None = None) -> Any:
+    im = ax.imshow(img, origin="lower", extent=grid.extent, cmap=_cmap(), norm=norm, interpolation="nearest",
+                   zorder=0)
+    _walls(ax, walls)
+    if fixes_xy is not None and len(fixes_xy):
+        ax.scatter(fixes_xy[:, 0], fixes_xy[:, 1], s=3, marker="o", color="0.55", lw=0, zorder=1)
+    ax.set_xlim(grid.extent[0], grid.extent[1])
+    ax.set_ylim(grid.extent[2], grid.extent[3])
+    return im
+
+
+def _data_norm(values: np.ndarray) -> Any:
+    """A linear colour scale over the finite values' full range (no clipping)."""
+    from matplotlib.colors import Normalize
+
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return Normalize(-100.0, -30.0)
+    lo, hi = float(v.min()), float(v.max())
+    return Normalize(lo, hi if hi > lo else lo + 1.0)
+
+
+def strongest_aps(cells: pd.DataFrame, top_n: int) -> pd.Series:
+    """The ``top_n`` APs with the highest peak cell mean (dBm), strongest first (ties: first seen)."""
+    peak = cells.groupby("bssid", sort=False)["rssi_mean_dbm"].max().dropna()
+    return peak.sort_values(ascending=False, kind="stable").iloc[:top_n]
+
+
+def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell_size_m: float | None = None,
+                    fixes_xy: np.ndarray | None = None) -> Any:
+    """Mean RSSI per cell of the ``top_n`` APs with the highest peak cell mean, one panel each, one colour
+    scale over the full range of what is drawn.
+
+    ``cells``: the radio map's long table (ix, iy, x_m, y_m, bssid, rssi_mean_dbm, ...; x_m, y_m cell
+    centres in the map frame); ``walls`` (n, 4) m and ``fixes_xy`` (n, 2) m in that frame. None without data.
+    """
+    need = {"ix", "iy", "bssid", "rssi_mean_dbm", "x_m", "y_m"}
+    if cells is None or len(cells) == 0 or not need <= set(cells.columns):
+        return None
+    peak = strongest_aps(cells, top_n)
+    if peak.empty:
+        return None
+    grid = Grid(cells, cell_size_m)
+    shown = cells[cells["bssid"].isin(peak.index)]
+    norm = _data_norm(shown["rssi_mean_dbm"].to_numpy(dtype=float))
+    ncol = min(3, len(peak))
+    nrow = int(np.ceil(len(peak) / ncol))
+    aspect = (grid.extent[3] - grid.extent[2]) / max(grid.extent[1] - grid.extent[0], 1e-9)
+    fig = _figure(3.9 * ncol + 0.9, (3.9 * min(max(aspect, 0.4), 1.6)) * nrow + 0.6)
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    im = None
+    for k, (ax, (ap, pk)) in enumerate(zip(axes.flat, peak.items())):
+        g = shown[shown["bssid"] == ap]
+        im = _draw_grid(ax, grid, grid.image(g, g["rssi_mean_dbm"].to_numpy(dtype=float)), norm,
+                        walls_array(walls), fixes_xy)
+        ax.set_title(f"{ap} (peak {pk:.0f} dBm)", fontsize=9)
+        _xy_axes(ax, left=k % ncol == 0, bottom=k // ncol == nrow - 1 or k + ncol >= len(peak))
+    for ax in list(axes.flat)[len(peak):]:
+        ax.set_axis_off()
+    fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.85, label="mean RSSI (dBm)")
+    fig.suptitle(f"the {len(peak)} strongest APs: mean RSSI per {grid.s:g} m cell", fontsize=11)
+    return fig
+
+
+def coverage_figure(cells: pd.DataFrame, cell_size_m: float | None = None, walls: Any = None,
+                    frame: str | None = None) -> Any:
+    """Scans per visited cell (same colour map as the heat maps; log scale from :data:`LOG_COUNT_FROM`
+    scans), cells filled by interpolation in grey. ``cells``: ix, iy, x_m, y_m, n_scans, interpolated."""
+    from matplotlib.colors import LogNorm, Normalize
+
+    grid = Grid(cells, cell_size_m)
+    n = cells["n_scans"].to_numpy(dtype=float)
+    interp = cells["interpolated"].to_numpy(dtype=bool) if "interpolated" in cells else np.zeros(len(cells), bool)
+    img = grid.image(cells, np.where(interp, np.nan, n))
+    vmax = max(float(np.nanmax(img)) if np.isfinite(img).any() else 1.0, 1.0)
+    norm = LogNorm(1, vmax) if vmax >= LOG_COUNT_FROM else Normalize(0, vmax)
+    aspect = (grid.extent[3] - grid.extent[2]) / max(grid.extent[1] - grid.extent[0], 1e-9)
+    fig = _figure(7.5, 1.2 + 6.0 * min(max(aspect, 0.4), 1.6))
+    ax = fig.subplots()
+    if interp.any():
+        ax.imshow(grid.image(cells, np.where(interp, 1.0, np.nan)), origin="lower", extent=grid.extent,
+                  cmap="Greys", vmin=0, vmax=4, interpolation="nearest", zorder=0)
+    im = _draw_grid(ax, grid, img, norm, walls_array(walls))
+    fig.colorbar(im, ax=ax, label="scans per cell", shrink=0.85)
+    _xy_axes(ax)
+    ax.set_title(f"coverage: {int((~interp).sum())} visited cells"
+                 + (f" + {int(interp.sum())} filled (grey)" if interp.any() else "")
+                 + f", {grid.s:g} m grid" + (f", {frame} frame" if frame else ""), fontsize=10)
+    return fig
+
+
+# ------------------------------------------------------------------ CDFs
+def cdf_figure(errors: Mapping[str, np.ndarray], title: str = "localization error CDF") -> Any:
+    """Empirical CDFs (``Axes.ecdf``) of per-scan position errors (m), one curve per label.
+
+    A label "map / localizer" gets the localizer's colour and the map's line style
+    (:data:`MAP_LINE_STYLES`), so the same localizer on two maps is one colour; other labels one colour each.
+    """
+    fig = _figure(7.8, 4.8)
+    ax = fig.subplots()
+    colours: dict[str, str] = {}
+    for label, e in errors.items():
+        e = np.asarray(e, dtype=float)
+        e = e[np.isfinite(e)]
         if e.size == 0:
             continue
-        ls = styles.get(label.split(" / ")[0], "-")
-        ax.step(e, np.arange(1, e.size + 1) / e.size, where="post", ls=ls, color=f"C{i % 10}",
-                label=f"{label} (median {np.median(e):.1f} m, n={e.size})")
-    ax.set_xlabel("error (m)")
-    ax.set_ylabel("fraction of scans")
+        map_name, _, loc = label.rpartition(" / ")
+        c = colours.setdefault(loc, f"C{len(colours) % 10}")
+        ax.ecdf(e, color=c, ls=MAP_LINE_STYLES.get(map_name, "-"), lw=1.4,
+                label=f"{label}: median {np.median(e):.1f} m, n = {e.size}")
+    for x in CDF_MARKS_M:
+        ax.axvline(x, color="0.8", lw=0.8, zorder=0)
+    ax.set_xlabel("position error (m)")
+    ax.set_ylabel("fraction of test scans")
     ax.set_ylim(0, 1.01)
     ax.set_xlim(left=0)
     ax.grid(alpha=0.3)
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7.5, loc="lower right")
     return fig
 
 
-def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None):
+# ------------------------------------------------------------------ walks and the optimiser
+def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequence[str],
+                 truth: pd.DataFrame | None = None, walls: np.ndarray | None = None,
+                 fixes: Sequence[pd.DataFrame | None] | None = None) -> Any:
+    """One panel per (title, poses) — poses with walk_id, x_m, y_m — over the floor plan (walls (n, 4) m)
+    and the true paths (thin dashed grey) when known; one colour per walk. ``fixes``: per panel, the
+    waypoints / position fixes (walk_id, x_m, y_m) in that panel's frame, or None when they cannot be
+    placed there; drawn as crosses in the walk's colour."""
+    order = {str(w): i for i, w in enumerate(walk_order)}
+    fig = _figure(6.2 * len(panels), 5.6 + (0.5 if len(walk_order) <= 12 else 0))
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    any_fix = False
+    for k, (ax, (title, poses)) in enumerate(zip(axes, panels)):
+        _walls(ax, walls, color="0.45")
+        if truth is not None:
+            for _, g in truth.groupby("walk_id", sort=False):
+                ax.plot(g["x_m"], g["y_m"], color="0.6", lw=0.7, ls="--", zorder=2)
+        for wid, g in poses.groupby("walk_id", sort=False):
+            ax.plot(g["x_m"], g["y_m"], color=_rgb(order.get(str(wid), 0)), lw=1.1, zorder=3)
+        fx = fixes[k] if fixes is not None and k < len(fixes) else None
+        if fx is not None and len(fx):
+            any_fix = True
+            cols = [_rgb(order.get(str(w), 0)) for w in fx["walk_id"]]
+            ax.scatter(fx["x_m"], fx["y_m"], s=22, marker="x", c=cols, lw=1.0, zorder=4)
+        ax.set_title(title, fontsize=10)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(_XY_LABELS[0])
+        ax.set_ylabel(_XY_LABELS[1])
+        ax.grid(alpha=0.2)
+    from matplotlib.lines import Line2D
+
+    handles = ([Line2D([], [], color=_rgb(i), label=str(w)) for i, w in enumerate(walk_order)]
+               if len(walk_order) <= 12 else [])
+    if truth is not None:
+        handles.append(Line2D([], [], color="0.6", ls="--", label="truth"))
+    if any_fix:
+        handles.append(Line2D([], [], color="0.2", marker="x", ls="", label="waypoints / fixes"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 7), fontsize=8,
+                   frameon=False)
+    return fig
+
+
+def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None) -> Any:
     """The optimiser's cost per iteration (log scale when positive); with ``solve`` (the solve of each
     iteration) each solve is its own line and a dotted line marks where the next one starts."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.0, 3.2))
+    fig = _figure(6.4, 3.4)
+    ax = fig.subplots()
     c = np.asarray(cost, dtype=float)
     sv = np.zeros(c.size, dtype=np.int64) if solve is None else np.asarray(solve, dtype=np.int64)
     for k in np.unique(sv):
@@ -157,14 +291,13 @@ def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None):
         ax.plot(idx, c[idx], marker="o", ms=3, color="C0")
         if k > sv.min():
             ax.axvline(idx[0] - 0.5, color="0.5", ls=":", lw=1)
-    if sv.size and sv.max() > sv.min():
-        ax.text(0.99, 0.97, f"{sv.max() - sv.min() + 1} solves (dotted: a new solve, new factors)",
-                transform=ax.transAxes, ha="right", va="top", fontsize=8, color="0.3")
+    n_solves = int(sv.max() - sv.min() + 1) if sv.size else 1
     if c.size and np.all(c[np.isfinite(c)] > 0):
         ax.set_yscale("log")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("cost")
+    ax.set_xlabel("iteration, all solves in order" + ("; dotted: a new solve with new factors" if n_solves > 1
+                                                       else ""))
+    ax.set_ylabel("cost (factor-graph error)")
     ax.grid(alpha=0.3)
-    ax.set_title("optimiser cost per iteration", fontsize=10)
-    fig.tight_layout()
+    ax.set_title("optimiser cost per Levenberg-Marquardt iteration"
+                 + (f", {n_solves} solves" if n_solves > 1 else ""), fontsize=10)
     return fig

@@ -25,7 +25,7 @@ from rmbuild import __version__
 from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz import figures
-from rmbuild.viz.align import apply, frame_to_truth, per_walk_to_truth
+from rmbuild.viz.align import apply, frame_to_fixes, frame_to_truth, per_walk_to_fixes, per_walk_to_truth
 
 log = logging.getLogger(__name__)
 
@@ -169,48 +169,100 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
             missing[f"{s} (stale)"] = (f"{STAGE_COMMANDS[s]} ran on an earlier run of {', '.join(stale)}: its "
                                        f"figures may not match; re-run `rmbuild {STAGE_COMMANDS[s]} --force`")
     ds = ws.read_dataset()
-    wall_xy = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
-    walls = wall_xy if len(wall_xy) else None
+    walls = _plan_segments(ws, ds)
     gauge = (reports.get("optimize") or {}).get("gauge")
     figs, rt = _walk_figures(ws, ds, gauge, walls, missing)
-    figs += _map_figures(ws, heatmap_top_n, gauge, rt, walls, missing)
+    figs += _map_figures(ws, heatmap_top_n, gauge, rt, walls, _fixes_of(ds), missing)
     eval_figs, eval_rows = _evaluation(ws, reports.get("evaluate"), missing)
     page = _page(ws, figs + eval_figs, missing, eval_rows, reports)
     return Report(page, figs + eval_figs, missing)
 
 
+def _plan_segments(ws: Workspace, ds: Any) -> np.ndarray | None:
+    """The floor plan as segments (n, 4) x0, y0, x1, y1 in the building frame (m): the venue's walls, or
+    the boundary of the workspace plan's walkable space; None without a plan."""
+    wall_xy = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
+    if len(wall_xy):
+        return wall_xy
+    if not ws.exists("data.floorplan"):
+        return None
+    import shapely
+
+    from rmbuild.floorplan import from_local_geojson
+
+    plan = from_local_geojson(ws.read_json("data.floorplan"))
+    segs = [np.c_[c[:-1], c[1:]] for ring in shapely.get_parts(shapely.boundary(plan.walkable))
+            for c in [np.asarray(shapely.get_coordinates(ring))] if len(c) > 1]
+    return np.concatenate(segs) if segs else None
+
+
+def _fixes_of(ds: Any) -> pd.DataFrame | None:
+    fx = getattr(ds, "fixes", None)
+    if fx is None or len(fx) == 0 or not {"walk_id", "x_m", "y_m"} <= set(fx.columns):
+        return None
+    return fx
+
+
+def _before_panel(ds: Any, fixes: pd.DataFrame | None) -> tuple[tuple[str, pd.DataFrame], bool]:
+    """The raw walks (title, poses) and whether they are drawn in the building frame."""
+    raw = per_walk_to_truth(ds.poses, ds.truth_poses)
+    if raw is not None:
+        return ("before: raw PDR, each walk fitted to the truth on its own (SE(2))", raw), True
+    raw = per_walk_to_fixes(ds.poses, fixes)
+    if raw is not None:
+        n_left = ds.poses["walk_id"].nunique() - raw["walk_id"].nunique()
+        return ("before: raw PDR, each walk fitted to its own waypoints (SE(2))"
+                + (f"; {n_left} walk(s) with < 2 waypoints not drawn" if n_left else ""), raw), True
+    return ("before: raw PDR, each walk in its own frame", ds.poses), False
+
+
+def _after_panel(opt: pd.DataFrame, ds: Any, gauge: str | None, fixes: pd.DataFrame | None
+                 ) -> tuple[tuple[str, pd.DataFrame], Any, bool, int]:
+    """The optimised walks placed in the map (title, poses), the map-to-building transform (None when
+    unknown or not needed), whether the panel is in the building frame, how many unlinked walks are left out."""
+    shown = opt.copy()
+    unplaced = 0
+    if "linked" in shown:  # an unlinked walk's frame is arbitrary: not drawn with the placed ones
+        unplaced = int(shown.loc[~shown["linked"].astype(bool), "walk_id"].nunique())
+        shown = shown[shown["linked"].astype(bool)]
+    if gauge in BUILDING_FRAME_GAUGES:
+        return (f"after: optimised, in the building frame (fixed by the {gauge})", shown), None, True, unplaced
+    rt = frame_to_truth(opt, ds.truth_poses, gauge)
+    how = "all walks' true paths"
+    if rt is None and ds.truth_poses is None:
+        rt = frame_to_fixes(shown, fixes, gauge)
+        how = "the waypoints"
+    if rt is None:
+        return (f"after: optimised, in the frame of one walk (gauge {gauge})", shown), None, False, unplaced
+    xy = apply(rt, shown[["x_m", "y_m"]].to_numpy(dtype=float))
+    shown["x_m"], shown["y_m"] = xy[:, 0], xy[:, 1]
+    return (f"after: optimised; one SE(2) for all walks, fitted to {how}", shown), rt, True, unplaced
+
+
 def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray | None,
                   missing: dict[str, str]) -> tuple[list[ReportFigure], Any]:
-    """The walks before/after the optimisation and the optimiser's cost; also the optimiser-to-truth
+    """The walks before/after the optimisation and the optimiser's cost; also the optimiser-to-building
     transform (None when unknown)."""
-    opt = ws.read_table("optimize.poses") if ws.has("optimize") else None
-    rt = frame_to_truth(opt, ds.truth_poses, gauge) if opt is not None else None
-    panels: list[tuple[str, pd.DataFrame]] = []
-    raw_aligned = per_walk_to_truth(ds.poses, ds.truth_poses)
-    if raw_aligned is not None:
-        panels.append(("before: raw PDR, each walk fitted to the truth on its own (SE(2))", raw_aligned))
-    else:
-        panels.append(("before: raw PDR, each walk in its own frame", ds.poses))
-    unplaced = 0
-    if opt is not None:
-        shown = opt.copy()
-        if "linked" in shown:  # an unlinked walk's frame is arbitrary: not drawn with the placed ones
-            unplaced = int(shown.loc[~shown["linked"].astype(bool), "walk_id"].nunique())
-            shown = shown[shown["linked"].astype(bool)]
-        if rt is not None:
-            xy = apply(rt, shown[["x_m", "y_m"]].to_numpy(dtype=float))
-            shown["x_m"], shown["y_m"] = xy[:, 0], xy[:, 1]
-            title = "after: optimised, one SE(2) for all walks into the building frame"
-        else:
-            title = f"after: optimised, common frame (gauge {gauge})"
-        panels.append((title, shown))
+    fixes = _fixes_of(ds)
+    before, building = _before_panel(ds, fixes)
+    panels, panel_fixes = [before], [fixes if building else None]
+    rt, unplaced, all_building = None, 0, building
+    if ws.has("optimize"):
+        after, rt, building, unplaced = _after_panel(ws.read_table("optimize.poses"), ds, gauge, fixes)
+        panels.append(after)
+        panel_fixes.append(None if fixes is None or not building
+                           else fixes[fixes["walk_id"].isin(after[1]["walk_id"].unique())])
+        all_building &= building
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
-    plan_frame_ok = ds.truth_poses is not None or gauge in BUILDING_FRAME_GAUGES
-    drawn_walls = walls if (plan_frame_ok or opt is None) else None
-    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls)
+    drawn_walls = walls if all_building else None
+    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls,
+                               fixes=panel_fixes)
     caption = "Coloured: one colour per walk"  # and only what is drawn
     caption += "; dashed grey: ground truth" if ds.truth_poses is not None else " (no true paths to draw)"
+    n_fix = max((len(f) for f in panel_fixes if f is not None), default=0)
+    if n_fix:
+        caption += f"; crosses: waypoints / position fixes ({n_fix}), in their walk's colour"
     caption += "; dark lines: floor plan." if drawn_walls is not None else "."
     if unplaced:
         caption += (f" After: {unplaced} walk(s) not linked to the map are not drawn (their frame is arbitrary;"
@@ -228,26 +280,35 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
 
 
 def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, walls: np.ndarray | None,
-                 missing: dict[str, str]) -> list[ReportFigure]:
+                 fixes: pd.DataFrame | None, missing: dict[str, str]) -> list[ReportFigure]:
     if not (ws.has("map") and ws.exists("map.cells")):
         missing["map"] = "export-map has not run"
         return []
     cells = ws.read_table("map.cells")
     sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
     cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
-    walls_map = None
-    if walls is not None:
-        if gauge in BUILDING_FRAME_GAUGES or rt is None:
-            walls_map = walls if gauge in BUILDING_FRAME_GAUGES else None
-        else:  # walls into the map (optimiser) frame: map = R^T (building - t)
-            r, t = rt
-            walls_map = ((walls.reshape(-1, 2) - t) @ r).reshape(-1, 4)
-    fig = figures.heatmaps_figure(cells, heatmap_top_n, walls_map, cell_size)
+    frame = (sidecar or {}).get("frame")
+
+    def to_map(xy: np.ndarray) -> np.ndarray | None:  # building frame -> map frame, None when unknown
+        if frame == "building" or gauge in BUILDING_FRAME_GAUGES:
+            return xy
+        if rt is None:
+            return None
+        r, t = rt
+        return (xy - t) @ r  # map = R^T (building - t)
+
+    walls_map = None if walls is None else to_map(walls.reshape(-1, 2))
+    fixes_map = None if fixes is None else to_map(fixes[["x_m", "y_m"]].to_numpy(dtype=float))
+    fig = figures.heatmaps_figure(cells, heatmap_top_n, None if walls_map is None else walls_map.reshape(-1, 4),
+                                  cell_size, fixes_map)
     if fig is None:
         missing["map"] = "the radio map table has no usable rows"
         return []
-    return [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig),
-                         "Mean RSSI per cell (dBm) in the map frame; empty cells were never visited.")]
+    caption = ("Mean RSSI per cell (dBm) in the map frame, one colour scale from the weakest to the strongest "
+               "value drawn; empty cells were never visited")
+    caption += "; dark lines: floor plan" if walls_map is not None else ""
+    caption += "; grey dots: waypoints / position fixes" if fixes_map is not None else ""
+    return [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig), caption + ".")]
 
 
 def _evaluation(ws: Workspace, ev: dict | None, missing: dict[str, str]

@@ -562,9 +562,11 @@ class RerunViewer:
                      static=True)
         peak = np.nanmax(np.where(np.isnan(t_mean), -np.inf, t_mean), axis=(1, 2))
         order = [int(j) for j in np.argsort(-peak, kind="stable")[:strongest] if np.isfinite(peak[j])]
+        shown = t_mean[order][np.isfinite(t_mean[order])] if order else np.zeros(0)
+        lo, hi = (float(shown.min()), float(shown.max())) if shown.size else (-100.0, -30.0)  # no clipping
         for rank, j in enumerate(order):
             path = f"{FLOOR}/map/strongest/{rank:02d}_{entity_part(aps[keep_aps[j]])}"
-            img = colormap(t_mean[j], -100.0, -30.0)
+            img = colormap(t_mean[j], lo, hi)
             self.rec.log(path, placement, static=True)
             self.rec.log(path, rr.Image(img, color_model="RGBA", opacity=0.9, draw_order=-4.0 + 0.01 * rank),
                          static=True)
