@@ -49,6 +49,8 @@ def test_view_save_matches_workspace(ws_full: Path, tmp_path: Path, capsys) -> N
     assert _positions(ents, "/floor/truth/" + ds.walk_ids()[0] + "/pos") == int(
         (ds.truth_poses["walk_id"] == ds.walk_ids()[0]).sum())
     assert ents["/floor/plan/walls"]["instances"]["LineStrips2D:strips"] == len(ds.venue["walls"])
+    assert len(ds.fixes) > 0  # the waypoints: crosses in the walk's colour, building frame
+    assert sum(_positions(ents, p) for p in ents if p.startswith("/floor/fixes/")) == len(ds.fixes)
     pairs = ws.read_table("optimize.pairs")
     assert ents["/floor/vicinity"]["instances"]["LineStrips2D:strips"] == min(len(pairs), MAX_VICINITY_LINES)
     hist = ws.read_table("optimize.history")

@@ -15,7 +15,7 @@ import numpy as np
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.viz import Viewer, ViewTarget, open_viewer
-from rmbuild.viz.align import frame_to_truth
+from rmbuild.viz.align import frame_to_fixes, frame_to_truth, plan_segments
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +38,8 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
     t = step("ingest")
     ds = ws.read_dataset()
     viewer.set_walks(ds.walk_ids())
-    viewer.log_venue(ds.venue)
+    walls = plan_segments(ds.venue, ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None)
+    viewer.log_venue(None if walls is None else {"walls": walls.tolist()})
     viewer.log_raw_walks(ds.poses)
     logged.append("raw walks")
     if ds.truth_poses is not None and len(ds.truth_poses):
@@ -46,6 +47,9 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
         logged.append("truth")
     else:
         skipped["truth"] = "no data/truth/poses.parquet"
+    if ds.fixes is not None and len(ds.fixes):
+        viewer.log_fixes(ds.fixes)
+        logged.append("waypoints")
     times["ingest"] = time.perf_counter() - t
 
     if ws.has("optimize"):
@@ -53,6 +57,8 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
         opt = ws.read_table("optimize.poses")
         gauge = (ws.read_report("optimize") or {}).get("gauge")
         rt = frame_to_truth(opt, ds.truth_poses, gauge)
+        if rt is None and ds.truth_poses is None:  # real data: the waypoints place the map in the building
+            rt = frame_to_fixes(opt[opt["linked"].astype(bool)] if "linked" in opt else opt, ds.fixes, gauge)
         if rt is not None:
             viewer.log_alignment(float(np.arctan2(rt[0][1, 0], rt[0][0, 0])), rt[1])
         viewer.log_optimized(opt)

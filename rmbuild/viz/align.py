@@ -115,3 +115,22 @@ def per_walk_to_fixes(poses: pd.DataFrame, fixes: pd.DataFrame | None) -> pd.Dat
     out = poses.loc[keep].copy()
     out["x_m"], out["y_m"] = xy[keep, 0], xy[keep, 1]
     return out
+
+
+def plan_segments(venue: dict | None, plan_geojson: dict | None) -> np.ndarray | None:
+    """The floor plan as segments (n, 4) x0, y0, x1, y1 in the building frame (m): the venue's walls, or
+    else the boundary of the walkable space of the workspace's plan (``data/floorplan.geojson``); None
+    without either."""
+    walls = np.asarray((venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
+    if len(walls):
+        return walls
+    if plan_geojson is None:
+        return None
+    import shapely
+
+    from rmbuild.floorplan import from_local_geojson
+
+    plan = from_local_geojson(plan_geojson)
+    segs = [np.c_[c[:-1], c[1:]] for ring in shapely.get_parts(shapely.boundary(plan.walkable))
+            for c in [np.asarray(shapely.get_coordinates(ring))] if len(c) > 1]
+    return np.concatenate(segs) if segs else None

@@ -25,7 +25,14 @@ from rmbuild import __version__
 from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz import figures
-from rmbuild.viz.align import apply, frame_to_fixes, frame_to_truth, per_walk_to_fixes, per_walk_to_truth
+from rmbuild.viz.align import (
+    apply,
+    frame_to_fixes,
+    frame_to_truth,
+    per_walk_to_fixes,
+    per_walk_to_truth,
+    plan_segments,
+)
 
 log = logging.getLogger(__name__)
 
@@ -179,21 +186,8 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
 
 
 def _plan_segments(ws: Workspace, ds: Any) -> np.ndarray | None:
-    """The floor plan as segments (n, 4) x0, y0, x1, y1 in the building frame (m): the venue's walls, or
-    the boundary of the workspace plan's walkable space; None without a plan."""
-    wall_xy = np.asarray((ds.venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
-    if len(wall_xy):
-        return wall_xy
-    if not ws.exists("data.floorplan"):
-        return None
-    import shapely
-
-    from rmbuild.floorplan import from_local_geojson
-
-    plan = from_local_geojson(ws.read_json("data.floorplan"))
-    segs = [np.c_[c[:-1], c[1:]] for ring in shapely.get_parts(shapely.boundary(plan.walkable))
-            for c in [np.asarray(shapely.get_coordinates(ring))] if len(c) > 1]
-    return np.concatenate(segs) if segs else None
+    """The floor plan as segments (n, 4) in the building frame (m), None without one."""
+    return plan_segments(ds.venue, ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None)
 
 
 def _fixes_of(ds: Any) -> pd.DataFrame | None:

@@ -188,9 +188,9 @@ def _walk_groups(poses: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
 def blueprint(rrb: Any, has: dict[str, bool]) -> Any:
     """The default layout: walks (raw | common frame) with the optimiser plots, radio map, evaluation."""
     walks_view = rrb.Spatial2DView(
-        name="common frame: optimised / truth / vicinity", origin="/",
-        contents=[f"+ /{FLOOR}/plan/**", f"+ /{FLOOR}/truth/**", f"+ /{FLOOR}/optimized/**",
-                  f"+ /{FLOOR}/vicinity/**"],
+        name="common frame: optimised / truth / waypoints / vicinity", origin="/",
+        contents=[f"+ /{FLOOR}/plan/**", f"+ /{FLOOR}/truth/**", f"+ /{FLOOR}/fixes/**",
+                  f"+ /{FLOOR}/optimized/**", f"+ /{FLOOR}/vicinity/**"],
     )
     raw_view = rrb.Spatial2DView(name="raw PDR walks (each in its own frame)", origin="/",
                                  contents=[f"+ /{RAW}/**"])
@@ -365,6 +365,23 @@ class RerunViewer:
         self.rec.log(f"{FLOOR}/plan/walls", self.rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=[0.1]),
                      static=True)
         self._count("walls", len(strips))
+
+    def log_fixes(self, fixes: pd.DataFrame) -> None:
+        """Waypoints / position fixes (walk_id, x_m, y_m, optional label), building frame: crosses in the
+        walk's colour under ``floor/fixes/<walk>``, labelled (e.g. "wp3") on hover."""
+        if fixes is None or len(fixes) == 0:
+            return
+        for wid, g in _walk_groups(fixes):
+            xy = _xy(g)
+            ok = np.isfinite(xy).all(axis=1)
+            if not ok.any():
+                continue
+            labels = g["label"].astype(str).to_numpy()[ok].tolist() if "label" in g else None
+            self.rec.log(f"{FLOOR}/fixes/{entity_part(wid)}",
+                         self.rr.Points2D(xy[ok], colors=[self._color(wid)], radii=[0.45], labels=labels,
+                                          show_labels=False),
+                         static=True)
+            self._count("fixes", int(ok.sum()))
 
     def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
                       parts: Sequence[str] = ALIGNED_PARTS) -> None:
