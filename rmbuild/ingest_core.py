@@ -198,9 +198,11 @@ def _pdr_one(wid: str, imu: RawImu, pdr_cfg: PdrConfig) -> tuple[pd.DataFrame, P
     return res.poses.to_frame(wid), rep, warn
 
 
-def derive_poses(raw: RawInput, pdr_cfg: PdrConfig) -> tuple[dict[str, PdrReport], list[str]]:
+def derive_poses(raw: RawInput, pdr_cfg: PdrConfig, on_walk: Callable[[str], None] | None = None
+                 ) -> tuple[dict[str, PdrReport], list[str]]:
     """Run the phone PDR on every walk of ``raw.imu`` and append the poses to ``raw.poses`` (with row names
-    "file (PDR step k)"). Returns the per-walk reports and the warnings (file:line where one applies)."""
+    "file (PDR step k)"). Returns the per-walk reports and the warnings (file:line where one applies).
+    ``on_walk(walk_id)`` is called after each walk (progress)."""
     if not raw.imu:
         return {}, []
     have = set(raw.poses["walk_id"].unique()) if len(raw.poses) else set()
@@ -213,6 +215,8 @@ def derive_poses(raw: RawInput, pdr_cfg: PdrConfig) -> tuple[dict[str, PdrReport
         df, reports[wid], warn = _pdr_one(wid, imu, pdr_cfg)
         frames.append(df)
         warnings += warn
+        if on_walk is not None:
+            on_walk(wid)
     n0 = len(raw.poses)
     new = pd.concat(frames, ignore_index=True)
     raw.poses = pd.concat([raw.poses, new], ignore_index=True) if n0 else new
@@ -312,14 +316,15 @@ def _pdr_summary(reports: dict[str, PdrReport]) -> dict:
 
 
 def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: PdrConfig | None = None,
-                  ) -> tuple[Dataset, Fingerprints, dict]:
+                  on_walk: Callable[[str], None] | None = None) -> tuple[Dataset, Fingerprints, dict]:
     """Run the PDR on raw IMU, validate, order, attach readings to nodes and average them into per-node
     fingerprints.
 
     ``source`` (the reader's format name) fills the walks' ``source`` column where the reader left it empty;
-    ``pdr_cfg``: the phone PDR's settings (defaults when None).
+    ``pdr_cfg``: the phone PDR's settings (defaults when None); ``on_walk(walk_id)``: called after the PDR
+    of each walk with raw IMU (progress).
     """
-    reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig())
+    reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig(), on_walk)
     validate(raw, cfg)
     walks = raw.walks.copy()
     for c in WALK_COLUMNS:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 import pytest
@@ -89,3 +90,33 @@ def test_bad_test_device_option(tmp_path: Path, capsys) -> None:
 def test_stage_on_missing_workspace(tmp_path: Path, capsys) -> None:
     r = run_cli(capsys, "optimize", "-w", tmp_path / "nothing")
     assert r.code == 2 and "not an rmbuild workspace" in r.err
+
+
+def test_progress_counts_and_log_lines(caplog) -> None:
+    """The bar's count column says done/total unit; -v leaves one line per finished phase with the count,
+    the time and the rate; without a terminal and -v nothing is drawn."""
+    import io
+    import logging
+
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from rmbuild.cli.progress import CountRateColumn, LogProgress, RichProgress, progress_display
+
+    bar = Progress(CountRateColumn(), console=Console(file=io.StringIO(), force_terminal=True, width=100))
+    rp = RichProgress(bar, verbose=True)
+    with caplog.at_level(logging.INFO, logger="rmbuild"):
+        rp.phase("reading", 5, "files")
+        rp.advance(3)
+        assert CountRateColumn().render(bar.tasks[-1]).plain.startswith("3/5 files")
+        rp.message("3 walks")
+        rp.close()
+    assert re.match(r"reading: done in [0-9.]+ s; 3/5 files \([0-9.,]+ files/s\); 3 walks", caplog.messages[-1])
+    lp = LogProgress()
+    with caplog.at_level(logging.INFO, logger="rmbuild"):
+        lp.phase("solving", None, "iterations")
+        lp.advance(4)
+        lp.close()
+    assert caplog.messages[-1].startswith("solving: done in") and "4 iterations" in caplog.messages[-1]
+    with progress_display(quiet=False, verbose=0) as p:  # pytest's stderr is no terminal
+        assert p is None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -139,6 +140,27 @@ def test_quiet_keeps_only_warnings_and_errors(tiny_ws: Path, tmp_path: Path, cap
         r = run_cli(capsys, *args, "-w", tmp_path / "ws", "-q")
         assert r.code == 0, r.err
         assert r.out == "" and all(ln.startswith("WARNING: ") for ln in r.err.splitlines() if ln.strip()), args
+
+
+def test_verbose_adds_counts_on_every_stage(tiny_ws: Path, tmp_path: Path, capsys) -> None:
+    """-v: each stage logs what it did, with counts (files read, scans searched, LM iterations, scans
+    localized per localizer); without it, no such line."""
+    shutil.copytree(tiny_ws / "ws", tmp_path / "ws")
+    expect = {"ingest": r"reading rmbuild: done in [0-9.]+ s; \d+/\d+ files",
+              "optimize": r"Levenberg-Marquardt: done in [0-9.]+ s; \d+ iterations",
+              "export-map": r"rasterising: done in",
+              "evaluate": r"evaluate: built map, knn: \d+ scans in [0-9.]+ s",
+              "report": r"report: walks\.png", "view": r"optimize: done in"}
+    for stage, pattern in expect.items():
+        args = ([stage, tiny_ws / "in", "-w", tmp_path / "ws2"] if stage == "ingest"
+                else [stage, "-w", tmp_path / "ws"])
+        args += ["--force"] if stage != "view" else ["--save", tmp_path / "v.rrd", "--force"]
+        plain = run_cli(capsys, *args)
+        loud = run_cli(capsys, *args, "-v")
+        assert plain.code == 0 and loud.code == 0, (stage, loud.err)
+        assert re.search(pattern, loud.err), (stage, loud.err)
+        assert not re.search(pattern, plain.err), stage
+        assert len(loud.err.splitlines()) > len(plain.err.splitlines()), stage
 
 
 def test_list_options_are_repeatable_and_comma_separated(tiny_ws: Path, tmp_path: Path, capsys) -> None:

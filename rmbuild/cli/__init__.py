@@ -87,10 +87,10 @@ def setup_logging(verbose: int, quiet: bool) -> None:
     level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
     if verbose == 0 and not quiet:
         level = logging.WARNING
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    from rmbuild.cli.progress import log_handler
+
     root = logging.getLogger("rmbuild")
-    root.handlers[:] = [handler]
+    root.handlers[:] = [log_handler()]
     root.setLevel(logging.INFO if verbose == 1 else level)
 
 

@@ -30,7 +30,8 @@ def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet
     # the maps are rasterised like export-map did (map_cfg None), unless a config file says otherwise
     map_cfg = load_stage_config("map", config_path) if config_path else None
     walks = list(test_walks) or None
-    with stage_viewer(rerun, workspace, "evaluate", quiet, force) as viewer, progress_display(quiet) as progress:
+    with (stage_viewer(rerun, workspace, "evaluate", quiet, force) as viewer,
+          progress_display(quiet, verbose) as progress):
         report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer,
                                   force=force)
     if not quiet:

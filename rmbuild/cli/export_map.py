@@ -24,7 +24,8 @@ def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, 
     from rmbuild.stages import export_map as stage
 
     cfg = load_stage_config("map", config_path, overrides={"cell_size_m": cell_size_m})
-    with stage_viewer(rerun, workspace, "map", quiet, force) as viewer, progress_display(quiet) as progress:
+    with (stage_viewer(rerun, workspace, "map", quiet, force) as viewer,
+          progress_display(quiet, verbose) as progress):
         r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force)
     if not quiet:
         where = Workspace(workspace).path("map.cells").parent

@@ -30,7 +30,8 @@ def ingest(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, 
 
     cfg = load_stage_config("ingest", config_path)
     pdr_cfg = load_stage_config("pdr", config_path)
-    with stage_viewer(rerun, workspace, "ingest", quiet, force) as viewer, progress_display(quiet) as progress:
+    with (stage_viewer(rerun, workspace, "ingest", quiet, force) as viewer,
+          progress_display(quiet, verbose) as progress):
         s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg,
                       viewer=viewer, floorplan=floorplan)
     if not quiet:

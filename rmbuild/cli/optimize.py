@@ -30,7 +30,8 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
 
         base = paper_config()
     cfg = load_stage_config("optimize", config_path, base=base)
-    with stage_viewer(rerun, workspace, "optimize", quiet, force) as viewer, progress_display(quiet) as progress:
+    with (stage_viewer(rerun, workspace, "optimize", quiet, force) as viewer,
+          progress_display(quiet, verbose) as progress):
         r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force)
     if quiet:
         return

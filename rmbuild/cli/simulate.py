@@ -42,7 +42,7 @@ def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, config_path, forc
         data = to_dict(cfg)
         data.setdefault("devices", {})["test_device"] = [k, b]
         cfg = from_dict(type(cfg), data, "--test-device")
-    with progress_display(quiet) as progress:
+    with progress_display(quiet, verbose) as progress:
         s = stage.run(out_dir, cfg, fmt=fmt, force=force, progress=progress, raw_imu=raw_imu)
     if not quiet:
         click.echo(f"simulated {s['walks']} walks, {s['steps']} steps, {s['readings']} Wi-Fi readings "

@@ -72,7 +72,10 @@ def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
             _wait_forever()
         finally:
             viewer.close()
-    r = stage.run(workspace, target)
+    from rmbuild.cli.progress import progress_display
+
+    with progress_display(quiet, verbose) as progress:
+        r = stage.run(workspace, target, progress=progress)
     if quiet:
         return
     where = r["path"] if r["path"] else f"the {r['mode']} viewer"

@@ -20,6 +20,8 @@
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -258,13 +260,17 @@ def evaluate(
     gauge: str = "se2",
     *,
     map_cfg: MapConfig | None = None,
+    progress: Callable[[str, dict], None] | None = None,
 ) -> EvalResult:
     """Build the built / surveyed / raw maps from the map walks and localize every test scan against each.
 
     ``built_xy``: float (n_nodes, 2) optimised node positions (row = node id). ``fingerprints``: the
     per-node fingerprints (their ``bssids`` fix the AP order of all maps).
     ``gauge``: "se2" or one of :data:`rmbuild.types.BUILDING_FRAME_GAUGES`.
-    ``map_cfg``: how the maps are rasterised (default MapConfig()). Raises InputError for bad input.
+    ``map_cfg``: how the maps are rasterised (default MapConfig()). ``progress(phase, info)``: called with
+    ("maps", {"maps": n}) once the maps are built and ("localize", {"map", "localizer", "scans", "done",
+    "total", "time_s"}) after each localizer has localized every test scan with a map. Raises InputError for
+    bad input.
     """
     cfg = cfg or EvaluateConfig()
     map_cfg = map_cfg or MapConfig()
@@ -340,12 +346,20 @@ def evaluate(
     errors: dict[str, dict[str, np.ndarray]] = {}
     preds: dict[str, dict[str, np.ndarray]] = {}
     consistency: dict[str, dict[str, dict]] = {}
+    total = len(maps) * len(cfg.localizers) * len(query)
+    if progress:
+        progress("maps", {"maps": len(maps), "total": total})
     for mname, rm in maps.items():
         stats[mname], errors[mname], preds[mname] = {}, {}, {}
         for lname in cfg.localizers:
+            t_loc = time.perf_counter()
             loc = make_localizer(lname, cfg).fit(rm)
             p = np.asarray(loc.predict(query), dtype=float)
             preds[mname][lname] = p
+            if progress:
+                progress("localize", {"map": mname, "localizer": lname, "scans": len(query), "total": total,
+                                      "done": sum(len(d) for d in preds.values()) * len(query),
+                                      "time_s": time.perf_counter() - t_loc})
             if src is not None:
                 err = np.hypot(*(p - q_ref).T)
                 errors[mname][lname] = err

@@ -16,11 +16,11 @@ from rmbuild.io.workspace import Workspace
 class Progress(Protocol):
     """What a stage reports while it runs; the CLI draws it, tests pass None.
 
-    ``phase(name, total)`` starts a phase of ``total`` units (None: unknown); ``advance(n)`` moves it on;
-    ``message(text)`` is a one-line status.
+    ``phase(name, total, unit)`` starts a phase of ``total`` ``unit`` (e.g. 106 "files"; None: unknown);
+    ``advance(n)`` moves it on; ``message(text)`` is a one-line status of the open phase.
     """
 
-    def phase(self, name: str, total: float | None = None) -> None: ...
+    def phase(self, name: str, total: float | None = None, unit: str = "") -> None: ...
 
     def advance(self, n: float = 1.0) -> None: ...
 
@@ -28,7 +28,7 @@ class Progress(Protocol):
 
 
 class NullProgress:
-    def phase(self, name: str, total: float | None = None) -> None:
+    def phase(self, name: str, total: float | None = None, unit: str = "") -> None:
         pass
 
     def advance(self, n: float = 1.0) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
@@ -15,6 +16,8 @@ from rmbuild.stages.mapping import built_positions
 from rmbuild.stages.view import log_workspace
 from rmbuild.viz.figures import cdf_figure
 from rmbuild.viz.viewer import Viewer, ensure_viewer
+
+log = logging.getLogger(__name__)
 
 
 def run(
@@ -42,6 +45,24 @@ def map_config_of(ws: Workspace) -> MapConfig:
     return load_stage_config_text("map", text, str(ws.path("map.config")))
 
 
+def _progress_adapter(progress: Progress):
+    """evaluate's ``progress(phase, info)`` -> one phase counting test scans localized over every map and
+    localizer, with a status naming the last localizer and its rate (SLAC and the particle filters are slow)."""
+
+    def on_progress(phase: str, info: dict) -> None:
+        if phase == "maps":
+            progress.phase(f"localizing with {info['maps']} maps", info["total"], "scans")
+        elif phase == "localize":
+            progress.advance(info["scans"])
+            rate = info["scans"] / info["time_s"] if info["time_s"] > 0 else float("inf")
+            progress.message(f"{info['map']} / {info['localizer']}: {info['scans']} scans in {info['time_s']:.1f} s "
+                             f"({rate:.0f} scans/s)")
+            log.info(f"evaluate: {info['map']} map, {info['localizer']}: {info['scans']} scans in "
+                     f"{info['time_s']:.1f} s ({rate:.0f} scans/s)")
+
+    return on_progress
+
+
 def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: list[str] | None, progress: Progress,
          force: bool, viewer: Viewer) -> tuple[dict, str]:
     from rmbuild.evaluate.localization import evaluate
@@ -62,8 +83,9 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
     for name in cfg.localizers:
         localizer_class(name)  # an unknown name fails before anything runs
     ws.check_can_write("evaluate", force)
-    progress.phase("building maps and localizing")
-    res = evaluate(ds, fp, xy, cfg, test_walks=test_walks, gauge=info["gauge"], map_cfg=map_cfg)
+    progress.phase("building the built / surveyed / raw maps")
+    res = evaluate(ds, fp, xy, cfg, test_walks=test_walks, gauge=info["gauge"], map_cfg=map_cfg,
+                   progress=_progress_adapter(progress))
     report = {"stage": "evaluate", **res.to_json(), "built_map_frame": info}
     report["time_s"] = {"total": round(time.perf_counter() - t0, 3)}
     q = res.query
@@ -78,6 +100,7 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
                 "error_m": err if err is not None else np.full(len(q), np.nan),
             }))
     tracks = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
+    progress.phase("writing tracks, errors, CDF")
     with ws.writing("evaluate") as w:
         w.table("evaluate.tracks", tracks)
         if len(tracks):

@@ -68,12 +68,25 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
          force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None) -> dict:
     t0 = time.perf_counter()
     reader = choose_reader(files, fmt, pdr_cfg)
-    progress.phase(f"reading {len(files)} file(s) as {reader.name}")
+    progress.phase(f"reading {reader.name}", len(files), "files")
+    counted = [0]
+
+    def on_file(f: Path) -> None:
+        counted[0] += 1
+        progress.advance()
+
+    reader.on_file = on_file
     raw = reader.read(files, cfg)
+    progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
-    progress.phase("validating and attaching readings")
+    if raw.imu:  # the count is the PDR's; validating and attaching follow it in the same phase
+        progress.phase("phone PDR, validating, attaching readings", len(raw.imu), "walks")
+    else:
+        progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
-    ds, fp, summary = build_dataset(raw, cfg, source=reader.name, pdr_cfg=pdr_cfg)
+    ds, fp, summary = build_dataset(raw, cfg, source=reader.name, pdr_cfg=pdr_cfg,
+                                    on_walk=lambda w: progress.advance())
+    progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
     summary["warnings"].extend(evidence_warnings(ds))
     plan = plan if plan is not None else raw.floorplan
     summary["floorplan"] = _plan_summary(plan, ds, summary["warnings"])

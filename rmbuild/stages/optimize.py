@@ -62,26 +62,14 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         anchors = read_anchors(anchors_path)
         check_anchors(anchors, ds, cfg.anchors.max_gap_s)
     ws.check_can_write("optimize", force)
-    state: dict[str, Any] = {"phase": None, "iter": 0}
-
-    def on_progress(phase: str, info: dict) -> None:
-        if phase != state["phase"]:
-            state["phase"] = phase
-            progress.phase(phase, info.get("total"))
-        if phase == "solve" and "cost_after" in info:
-            state["iter"] += 1
-            viewer.log_cost(state["iter"], float(info["cost_after"]))
-            progress.message(f"outer {info.get('outer')} iteration {info.get('iteration')}: "
-                             f"cost {info['cost_after']:.4g}")
-        elif "done" in info:
-            progress.advance(0)
-
+    on_progress = _progress_adapter(progress, viewer)
     anchor_table = anchors.table if anchors is not None else None
     plan = _floor_plan(ws, cfg)
     result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress, floorplan=plan)
     has_anchors = anchor_table is not None and len(anchor_table) > 0
     gauge = "anchors" if has_anchors else "floorplan" if plan is not None else "se2"
     _warn_plan_fit(result.stats)
+    progress.phase("trajectory metrics, writing")
     t_metrics = time.perf_counter()
     raw = trajectory_metrics(ds.poses, ds, align=True)
     # the optimised walks' alignment is fitted on the linked walks: an unlinked walk's frame is arbitrary
@@ -130,6 +118,40 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
         w.report = report
     log_workspace(ws, viewer)
     return report
+
+
+#: slam's progress phases -> (what the bar says, unit of its count)
+PHASE_NAMES = {"pair_search": ("searching Wi-Fi vicinity pairs", "scans"), "init": ("placing walks", ""),
+               "solve": ("Levenberg-Marquardt", "iterations")}
+
+
+def _progress_adapter(progress: Progress, viewer: Viewer):
+    """slam's ``progress(phase, info)`` callback -> the stage's progress: scans searched for pairs (of the
+    total), walks placed (linked by Wi-Fi, of all), LM iterations of each solve with the cost."""
+    state: dict[str, Any] = {"phase": None, "done": 0, "iter": 0, "solve": None, "solve_iter": 0}
+
+    def on_progress(phase: str, info: dict) -> None:
+        name, unit = PHASE_NAMES.get(phase, (phase, ""))
+        if phase != state["phase"]:
+            state.update(phase=phase, done=0)
+            total = info.get("total") if phase == "pair_search" else None
+            progress.phase(name, total, unit)
+        if phase == "pair_search" and "done" in info:
+            progress.advance(int(info["done"]) - state["done"])
+            state["done"] = int(info["done"])
+        elif phase == "init":
+            progress.message(f"{info.get('linked')} of {info.get('walks')} walks linked by Wi-Fi")
+        elif phase == "solve" and "cost_after" in info:
+            state["iter"] += 1
+            viewer.log_cost(state["iter"], float(info["cost_after"]))
+            progress.advance()
+            if info.get("outer") != state["solve"]:  # "outer" counts solves from 0
+                state.update(solve=info.get("outer"), solve_iter=0)
+            state["solve_iter"] += 1
+            progress.message(f"solve {int(state['solve'] or 0) + 1}, iteration {state['solve_iter']}: "
+                             f"cost {info['cost_after']:.4g}")
+
+    return on_progress
 
 
 def _floor_plan(ws: Workspace, cfg: OptimizeConfig) -> FloorPlan | None:

@@ -35,6 +35,7 @@ def _write(ws: Workspace, out: Path, png_dir: Path, heatmap_top_n: int) -> dict:
     report = build_report(ws, heatmap_top_n=heatmap_top_n)
     for f in report.figures:
         write_bytes_atomic(png_dir / f"{f.name}.png", f.png)
+        log.info(f"report: {f.name}.png ({len(f.png) / 1024:.0f} kB): {f.title}")
     write_text_atomic(out, report.html)
     return {
         "stage": "report",

@@ -93,6 +93,13 @@ class Reader(ABC):
     def __init__(self, options: PdrConfig | None = None) -> None:
         """``options``: the ``[pdr]`` config (phone PDR and format specifics); defaults when None."""
         self.options = options if options is not None else PdrConfig()
+        #: called with each input file once it is read (progress); set by the caller, None: nobody counts
+        self.on_file: Callable[[Path], None] | None = None
+
+    def file_done(self, f: Path) -> None:
+        """Report that ``f`` has been read (readers call it once per input file they parse)."""
+        if self.on_file is not None:
+            self.on_file(f)
 
     @classmethod
     @abstractmethod

@@ -303,6 +303,7 @@ class IpinReader(Reader):
                 raise InputError(f"duplicate logfile id {log.walk_id!r} (also {seen[log.walk_id]})", str(f))
             seen[log.walk_id] = f
             logs.append(log)
+            self.file_done(f)
         notes: list[str] = []
         # ENU origin for POSI
         if opts.ipin.origin_lat_deg is not None and opts.ipin.origin_lon_deg is not None:

@@ -456,6 +456,7 @@ class MsftIlcReader(Reader):
             n_stale += tr.n_wifi_stale
             n_dup += tr.n_wifi_dup
             n_wifi += tr.n_wifi_stale + tr.n_wifi_dup + len(tr.wifi)
+            self.file_done(f)
         if n_wifi:
             notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
                          f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
