@@ -31,10 +31,11 @@ from bench.common import write_result
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.config.simulate import CARRY_MODES
+from rmbuild.geometry import wrap as wrap_angle
 from rmbuild.ingest_core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader
-from rmbuild.pdr import run_pdr, wrap_angle
+from rmbuild.pdr import run_pdr
 from rmbuild.pdr.synth import synthesize_phone_imu
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"

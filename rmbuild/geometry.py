@@ -15,7 +15,9 @@ import numpy as np
 
 
 def wrap(a):
-    """Angle(s) (rad) wrapped to (-pi, pi]."""
+    """Angle(s) (rad) wrapped to (-pi, pi] (an angle of exactly +-pi may come back as -pi: the sign of
+    sin(pi) in floating point); NaN stays NaN. The one angle wrap of rmbuild (PDR headings, the simulator,
+    the SLAM back end)."""
     return np.angle(np.exp(1j * np.asarray(a, dtype=float)))
 
 

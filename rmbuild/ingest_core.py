@@ -15,6 +15,7 @@ import pandas as pd
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
+from rmbuild.geometry import wrap
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import FIX_COLUMNS, POSE_COLUMNS, WALK_COLUMNS, WIFI_COLUMNS, Dataset, Fingerprints
@@ -440,6 +441,6 @@ def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_ga
         xyh[rows, 0] = np.interp(t, tt, g["x_m"].to_numpy(float))
         xyh[rows, 1] = np.interp(t, tt, g["y_m"].to_numpy(float))
         h = np.interp(t, tt, np.unwrap(g["heading_rad"].to_numpy(float)))
-        xyh[rows, 2] = np.arctan2(np.sin(h), np.cos(h))
+        xyh[rows, 2] = wrap(h)
     out["x_m"], out["y_m"], out["heading_rad"] = xyh[:, 0], xyh[:, 1], xyh[:, 2]
     return out[["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]]

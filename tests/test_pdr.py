@@ -10,9 +10,10 @@ import pytest
 from rmbuild.config.base import from_dict
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import ConfigError
+from rmbuild.geometry import wrap as wrap_angle
 from rmbuild.pdr import ImuSignals, ImuTimeError, integrate_increments, poses_from_increments, run_pdr, yaw_from_quat
 from rmbuild.pdr.attitude import integrate_rates, quat_rotate
-from rmbuild.pdr.heading import interval_mean, wrap_angle, yaw_from_azimuth_deg
+from rmbuild.pdr.heading import interval_mean, yaw_from_azimuth_deg
 from rmbuild.pdr.length import step_lengths, step_swings
 from rmbuild.pdr.synth import rotation_vector_samples, synthesize_phone_imu
 from rmbuild.pdr.timebase import GRID_POINTS_PER_SAMPLE, main_block, uniform_grid
@@ -287,3 +288,15 @@ def test_phone_waved_not_walked_counts_no_steps():
     assert abs(len(res.poses) - 1 - len(st)) <= 1 and res.poses.t_s[1] > 20.0
     assert res.report.handling_s >= 15.0 and np.isnan(res.poses.yaw_abs_rad[0])
     assert np.isfinite(res.poses.yaw_abs_rad[5:]).all()
+
+
+def test_one_angle_wrap_matches_the_modulo_it_replaced() -> None:
+    """geometry.wrap (now the PDR's and the simulator's wrap too) equals the (a + pi) % 2pi - pi the PDR
+    and the walkers used, to rounding (+-pi itself may keep either sign); NaN stays NaN."""
+    a = np.random.default_rng(4).uniform(-60, 60, 10_000)
+    old = (a + np.pi) % (2 * np.pi) - np.pi
+    new = wrap_angle(a)
+    assert np.all((new > -np.pi) & (new <= np.pi))
+    assert np.abs(new - old).max() < 1e-13
+    np.testing.assert_allclose(np.abs(wrap_angle(np.array([np.pi, -np.pi, 3 * np.pi]))), np.pi, rtol=0, atol=1e-15)
+    assert np.isnan(wrap_angle(np.array([np.nan]))[0])

@@ -15,7 +15,7 @@ from rmbuild.pdr.core import (
     poses_from_increments,
     run_pdr,
 )
-from rmbuild.pdr.heading import accuracy_flags, rotation_vector_quat, wrap_angle, yaw_from_azimuth_deg, yaw_from_quat
+from rmbuild.pdr.heading import accuracy_flags, rotation_vector_quat, yaw_from_azimuth_deg, yaw_from_quat
 from rmbuild.pdr.quality import PdrReport
 from rmbuild.pdr.timebase import ImuTimeError, TimeIssue
 
@@ -31,7 +31,6 @@ __all__ = [
     "poses_from_increments",
     "rotation_vector_quat",
     "run_pdr",
-    "wrap_angle",
     "yaw_from_azimuth_deg",
     "yaw_from_quat",
 ]

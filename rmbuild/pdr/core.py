@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.pdr import PdrConfig
-from rmbuild.pdr.heading import interval_mean, wrap_angle
+from rmbuild.geometry import wrap
+from rmbuild.pdr.heading import interval_mean
 from rmbuild.pdr.length import step_lengths, step_swings
 from rmbuild.pdr.quality import PdrReport, assess
 from rmbuild.pdr.steps import GaitWindows, bandpassed_magnitude, gait_windows, pick_steps
@@ -153,7 +154,7 @@ def _absolute_yaw(imu: ImuSignals, t0: float, step_t: np.ndarray, w0: np.ndarray
         return np.full(k + 1, np.nan), np.full(k + 1, np.nan)
     yaw_u = np.unwrap(np.asarray(imu.yaw_abs_rad, dtype=np.float64))
     yaw0 = float(np.interp(t0, imu.t_yaw_s, yaw_u))
-    yaw_abs = wrap_angle(np.r_[yaw0, interval_mean(imu.t_yaw_s, yaw_u, w0, w1) if k else np.zeros(0)])
+    yaw_abs = wrap(np.r_[yaw0, interval_mean(imu.t_yaw_s, yaw_u, w0, w1) if k else np.zeros(0)])
     at = np.interp(np.r_[t0, step_t], imu.t_yaw_s, np.arange(len(imu.t_yaw_s)))
     return yaw_abs, yaw_sigma(np.asarray(imu.yaw_accuracy)[np.rint(at).astype(np.int64)], cfg)
 
@@ -231,7 +232,7 @@ def run_pdr(imu: ImuSignals, cfg: PdrConfig) -> PdrResult:
     turn = np.interp(step_t + period / 2, yaw.t_s, yaw.yaw_rad) - np.interp(step_t - period / 2, yaw.t_s, yaw.yaw_rad)
     length = step_lengths(step_swings(step_t, period, grid.t_s, s), turn, cfg)
     t, x, y, h = integrate_steps(t0, step_t, length, rel)
-    poses = StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=yaw_abs,
+    poses = StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap(h), yaw_abs_rad=yaw_abs,
                       yaw_abs_sigma_rad=sig, step_freq_hz=np.r_[np.nan, 1.0 / period],
                       step_length_m=np.r_[0.0, length])
     rep = assess(poses, det, yaw, issues, float(imu.t_acc_s[-1]) - t0)
@@ -247,6 +248,6 @@ def poses_from_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: 
     f = np.where((dt > 0) & (dt <= 1.5), 1.0 / np.where(dt > 0, dt, 1.0), np.nan)
     freq = np.r_[np.nan, np.nan, f] if len(t_s) else np.full(1, np.nan)
     n = len(t)
-    return StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap_angle(h), yaw_abs_rad=np.full(n, np.nan),
+    return StepPoses(t_s=t, x_m=x, y_m=y, heading_rad=wrap(h), yaw_abs_rad=np.full(n, np.nan),
                      yaw_abs_sigma_rad=np.full(n, np.nan), step_freq_hz=freq,
                      step_length_m=np.r_[0.0, np.hypot(dx_m, dy_m)])

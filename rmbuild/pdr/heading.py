@@ -1,4 +1,5 @@
-"""Angles and the rotation vector: wrap, Android rotation vector -> quaternion -> yaw, interval means.
+"""Angles and the rotation vector: Android rotation vector -> quaternion -> yaw, interval means (the wrap is
+:func:`rmbuild.geometry.wrap`).
 
 Convention (used for every ``*_rad`` heading in rmbuild): counter-clockwise from the x axis. For the
 absolute yaw the world frame is Android's ENU (x east, y north), so ``yaw_abs_rad = pi/2 - azimuth``.
@@ -8,10 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
+from rmbuild.geometry import wrap
 
 
 def rotation_vector_quat(xyz: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
@@ -55,7 +53,7 @@ def accuracy_flags(values: np.ndarray) -> np.ndarray:
 
 def yaw_from_azimuth_deg(azimuth_deg: np.ndarray) -> np.ndarray:
     """ENU yaw in rad from a compass azimuth in degrees (clockwise from north)."""
-    return wrap_angle(np.pi / 2 - np.deg2rad(np.asarray(azimuth_deg, dtype=np.float64)))
+    return wrap(np.pi / 2 - np.deg2rad(np.asarray(azimuth_deg, dtype=np.float64)))
 
 
 def interval_mean(t_s: np.ndarray, values: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.simulate import PhoneImuConfig
-from rmbuild.pdr.heading import wrap_angle
+from rmbuild.geometry import wrap
 from rmbuild.pdr.synth import synthesize_phone_imu
 
 #: columns of the raw-IMU input table (docs/data-format.md)
@@ -31,7 +31,7 @@ def _walk_imu(truth: pd.DataFrame, yaw_abs: np.ndarray, rng: np.random.Generator
     fs = float(rng.uniform(*cfg.sample_hz))
     bounce = float(rng.uniform(*cfg.bounce_scale))
     bias = np.deg2rad(rng.normal(0.0, cfg.gyro_bias_sd_dps, 3))
-    err = wrap_angle(yaw_abs - hd)   # the simulated magnetometer's error at each step (NaN: none)
+    err = wrap(yaw_abs - hd)   # the simulated magnetometer's error at each step (NaN: none)
     imu = synthesize_phone_imu(
         t[1:], hd[1:], rng, mode=mode, step_length_m=np.hypot(*np.diff(xy, axis=0).T), fs_hz=fs,
         t_start_s=t[0], t_end_s=t[-1] + 1.0, jitter_s=cfg.jitter_ms / 1000.0, acc_noise_mps2=cfg.acc_noise_mps2,

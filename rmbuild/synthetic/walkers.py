@@ -10,12 +10,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from rmbuild.config.simulate import ImuConfig, MagnetometerConfig, WalkersConfig
+from rmbuild.geometry import wrap
 from rmbuild.synthetic.venue import CORRIDOR, DOOR, HALL, JUNCTION, ROOM, Venue
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 @dataclass
@@ -220,7 +216,7 @@ def dead_reckon(
     bias = bias0 + np.cumsum(bias_rw)
     step_noise = np.deg2rad(icfg.heading_step_noise_deg) * rng.standard_normal(n - 1)
     eps = np.r_[0.0, np.cumsum(bias * dt + step_noise)]
-    own_heading = wrap_angle(heading - heading[0] + eps)
+    own_heading = wrap(heading - heading[0] + eps)
     own_heading[0] = 0.0
     steps = meas_len[:, None] * np.c_[np.cos(own_heading[1:]), np.sin(own_heading[1:])]
     own_xy = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
@@ -252,4 +248,4 @@ class MagneticField:
         c = self.cfg
         offset = np.deg2rad(c.north_offset_deg + rng.normal(0.0, c.walk_offset_sd_deg))
         noise = np.deg2rad(c.noise_sd_deg) * rng.standard_normal(len(heading))
-        return wrap_angle(heading + offset + self.disturbance_rad(xy) + noise)
+        return wrap(heading + offset + self.disturbance_rad(xy) + noise)

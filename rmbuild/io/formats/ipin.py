@@ -49,27 +49,16 @@ _NAME_SUFFIXES = (".txt", ".txt.gz", ".log", ".log.gz", ".csv", ".csv.gz")
 _SCHEMA_NAMES = re.compile(
     r"^(walks|poses|wifi|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
 
-# WGS84 ellipsoid
-_A = 6378137.0
-_F = 1 / 298.257223563
-_E2 = _F * (2 - _F)
-
-
 def wgs84_to_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float, lon0_deg: float,
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """East/north in m of WGS84 points (ellipsoid height 0) in the local ENU frame at (lat0, lon0)."""
-    def ecef(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-        n = _A / np.sqrt(1 - _E2 * np.sin(lat) ** 2)
-        return np.stack([n * np.cos(lat) * np.cos(lon), n * np.cos(lat) * np.sin(lon),
-                         n * (1 - _E2) * np.sin(lat)])
+    """East/north in m of WGS84 points (ellipsoid height 0) in the local ENU frame at (lat0, lon0) (PROJ's
+    geodesy through pyproj, :func:`rmbuild.floorplan.lonlat_to_enu`)."""
+    from rmbuild.floorplan import lonlat_to_enu
 
-    lat = np.deg2rad(np.asarray(lat_deg, dtype=np.float64))
-    lon = np.deg2rad(np.asarray(lon_deg, dtype=np.float64))
-    la0, lo0 = math.radians(lat0_deg), math.radians(lon0_deg)
-    d = ecef(lat, lon) - ecef(np.array(la0), np.array(lo0)).reshape(3, *([1] * lat.ndim))
-    e = -math.sin(lo0) * d[0] + math.cos(lo0) * d[1]
-    n = -math.sin(la0) * math.cos(lo0) * d[0] - math.sin(la0) * math.sin(lo0) * d[1] + math.cos(la0) * d[2]
-    return e, n
+    lat = np.asarray(lat_deg, dtype=np.float64)
+    lon = np.asarray(lon_deg, dtype=np.float64)
+    en = lonlat_to_enu(lon0_deg, lat0_deg)(np.c_[lon.ravel(), lat.ravel()])
+    return en[:, 0].reshape(lat.shape), en[:, 1].reshape(lat.shape)
 
 
 def _walk_id(p: Path) -> str:
