@@ -85,3 +85,23 @@ def test_ipin_sample_logfiles_read():
         poses = raw.poses[raw.poses["walk_id"] == walk_id]
         rate = (len(poses) - 1) / np.ptp(poses["t_s"].to_numpy())
         assert 0.3 < rate < 1.2                                        # steps/s, pauses at the marks included
+
+
+def test_console_lines_on_the_real_sample(tmp_path: Path, capsys) -> None:
+    """What a user reads on real data (waypoints, no true paths, one walk unlinked): figures where they
+    exist and no "n/a", the map's frame named plainly, the unlinked walk's warning naming the remedies."""
+    from cli_util import run_cli
+
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "ingest", ILC_FLOOR, "-w", ws, "-q").code == 0
+    r = run_cli(capsys, "optimize", "-w", ws)
+    assert r.code == 0, r.err
+    assert "n/a" not in r.out and "gauge" not in r.out
+    assert "map frame: that of walk" in r.out and "errors against the waypoints" in r.out
+    assert "landmark error mean" in r.out and "no true paths: no ATE" in r.out  # says why there is no ATE
+    unlinked = [ln for ln in r.err.splitlines() if "not linked to the reference walk" in ln]
+    assert len(unlinked) <= 1
+    for ln in unlinked:
+        assert "--anchors" in ln and "--floorplan" in ln and "more walks" in ln
+    r = run_cli(capsys, "export-map", "-w", ws)
+    assert r.code == 0 and "walk:" not in r.out and "in the frame of walk" in r.out

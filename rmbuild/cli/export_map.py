@@ -30,8 +30,17 @@ def export_map(workspace, anchors_path, cell_size_m, rerun, config_path, force, 
     if not quiet:
         where = Workspace(workspace).path("map.cells").parent
         click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
-                   f"{r['reference_nodes']} reference nodes, frame {r['frame']} -> {where}")
+                   f"{r['reference_nodes']} reference nodes, {_frame(r['frame'])} -> {where}")
         left = r["frame_info"].get("left_out_walks") or []
         if left:
             click.echo(f"note: {len(left)} walk(s) placed neither by Wi-Fi links nor by anchors were left out: "
                        f"{', '.join(left[:8])}", err=True)
+
+
+def _frame(frame: str) -> str:
+    """The map's frame in plain words ("walk:<id>" is the sidecar's name for a walk's frame)."""
+    if frame == "building":
+        return "in the building frame"
+    if frame.startswith("walk:"):
+        return f"in the frame of walk {frame[5:]} (not tied to the building)"
+    return f"in the frame of the {frame}"

@@ -22,7 +22,7 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
     from rmbuild.stages import optimize as stage
-    from rmbuild.stages.optimize import fmt_metric
+    from rmbuild.stages.optimize import frame_text, metrics_text
 
     base = None
     if preset == "paper":
@@ -38,7 +38,7 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     f = r["factors"]
     click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
                f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "
-               f"{r['time_s'].get('stage_total', 0):.1f} s (gauge: {r['gauge']})")
+               f"{r['time_s'].get('stage_total', 0):.1f} s; {frame_text(r)}")
     sc = r.get("scale") or {}
     if sc.get("fitted_walks"):
         click.echo(f"  step-length scale fitted on {sc['fitted_walks']} walk(s): {sc['min']:.3f}-{sc['max']:.3f} "
@@ -52,15 +52,26 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     if plan:
         click.echo(f"  floor plan: {plan['inside']:.0%} of the reference component's poses in walkable space, "
                    f"{plan['wall_priors']} wall priors, {plan['placed_components']} further component(s) placed")
-    for name in ("raw", "optimized"):
-        m = r.get(name) or {}
-        lm = m.get("landmark_error_m")
-        click.echo(f"  {name:9s} ATE rmse {fmt_metric(m.get('ate_m'), 'rmse')} m, landmark error mean "
-                   f"{fmt_metric(lm, 'mean')} m (max {fmt_metric(lm, 'max')}), heading error mean "
-                   f"{fmt_metric(m.get('heading_alignment_error_deg'), 'mean')} deg")
+    _errors(r, metrics_text)
+
+
+def _errors(r: dict, metrics_text) -> None:
+    """The error lines: only figures that could be computed, and what they were measured against."""
+    lines = [(name, metrics_text(r.get(name))) for name in ("raw", "optimized")]
+    if not any(t for _, t in lines):
+        click.echo("  no true paths or position fixes: no error against ground truth")
+        return
+    have_truth = (r.get("raw") or {}).get("ate_m") is not None
+    how = "true paths" if have_truth else "the waypoints / position fixes (no true paths: no ATE)"
+    fit = ("each after one rigid fit of all walks together" if r.get("gauge") == "se2" else
+           "raw after one rigid fit of all walks together, optimised as placed in the building frame")
+    click.echo(f"  errors against {how}, {fit}:")
+    for name, text in lines:
+        if text:
+            click.echo(f"  {name:9s} {text}")
     lk = (r.get("optimized") or {}).get("landmark_error_fitted_walks_m")
     al = r.get("metrics_alignment") or {}
     if lk and al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]:
-        click.echo(f"  linked walks only ({r['metrics_alignment']['walks']} of {r['walks']}): landmark error mean "
-                   f"{fmt_metric(lk, 'mean')} m (max {fmt_metric(lk, 'max')}); the unlinked walks keep "
-                   "arbitrary frames and are left out of the map")
+        click.echo(f"  linked walks only ({al['walks']} of {r['walks']}): "
+                   f"{metrics_text({'landmark_error_m': lk})}; the unlinked walks keep arbitrary frames and "
+                   "are left out of the map")

@@ -240,11 +240,19 @@ class EvalResult:
                 lines.append(f"{m:<9}{loc:<{w}}{f(s['mean'], 7)}{f(s['median'], 8)}{f(s['p90'], 7)}"
                              f"{f(s['rmse'], 7)}{f(s['max'], 7)}{f(s['p_lt_5m'], 6)}{f(s['p_lt_10m'], 6)}"
                              f"{s['n']:>6d}")
-        lines.append(f"gauge: {self.gauge}; test walks: {len(self.test_walks)} ({self.split_rule}); "
-                     f"errors in m")
+        lines.append(f"{self.frame_note()}; test walks: {len(self.test_walks)} ({self.split_rule}); errors in m")
         for what, why in self.unavailable.items():
             lines.append(f"not computed: {what}: {why}")
         return "\n".join(lines)
+
+    def frame_note(self) -> str:
+        """How the built map was compared with the reference positions, in plain words."""
+        how = self.alignment.get("built")
+        if how == "se2":
+            return "built map: one rigid fit to the reference positions (its own frame is one walk's)"
+        if how in BUILDING_FRAME_GAUGES:
+            return f"built map: in the building frame as placed ({'anchors' if how == 'anchors' else 'floor plan'})"
+        return "built map: in its own frame (no reference positions to fit it to)"
 
     def errors_by_label(self) -> dict[str, np.ndarray]:
         """Per "map / localizer" the per-scan errors (m), maps in :data:`MAP_NAMES` order."""

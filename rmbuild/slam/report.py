@@ -80,4 +80,6 @@ def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str
     also = f"; {by_anchor} more placed by anchors alone" if by_anchor else ""
     return (f"{len(unlinked)} of {int(walks.keep.sum())} walk(s) not linked to the reference walk "
             f"{walks.walk_ids[reference]} ({names}): their placement is not constrained by Wi-Fi{also} "
-            "(optimize/walks.parquet: linked, anchored, component)")
+            "and they are left out of the map (optimize/walks.parquet: linked, anchored, component); to place "
+            "them give known positions (`optimize --anchors FILE`), a floor plan (`ingest --floorplan FILE`, "
+            "optimize.floorplan.use = true) or more walks through the same places")

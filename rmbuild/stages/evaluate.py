@@ -105,8 +105,8 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
         w.table("evaluate.tracks", tracks)
         if len(tracks):
             w.table("evaluate.errors", tracks[["map", "localizer", "walk_id", "t_s", "error_m"]])
-        w.figure("evaluate.cdf_png", cdf_figure(res.errors_by_label(), "localization error CDF (gauge: "
-                                                f"{res.gauge}, {len(res.test_walks)} test walks)"))
+        w.figure("evaluate.cdf_png", cdf_figure(res.errors_by_label(), f"localization error CDF, "
+                                                f"{len(res.test_walks)} test walks; {res.frame_note()}"))
         w.config(to_toml(cfg, "evaluate") + "\n" + to_toml(map_cfg, "map"))
         w.report = report
     log_workspace(ws, viewer)

@@ -171,8 +171,35 @@ def _warn_plan_fit(stats: dict) -> None:
                     "space; the map may not sit in the plan's frame")
 
 
-def fmt_metric(m: dict | None, key: str) -> str:
-    if not m or m.get(key) is None:
-        return "n/a"
-    v = m[key]
-    return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f}"
+def _num(m: dict | None, key: str) -> float | None:
+    v = (m or {}).get(key)
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+
+
+def metrics_text(m: dict | None) -> str:
+    """The figures of one METRICS block that could be computed, e.g. "ATE rmse 1.20 m, landmark error
+    mean 1.04 m (max 1.45, 30 fixes), heading error mean 1.60 deg"; "" when none could."""
+    m = m or {}
+    parts = []
+    if (ate := _num(m.get("ate_m"), "rmse")) is not None:
+        parts.append(f"ATE rmse {ate:.2f} m")
+    lm = m.get("landmark_error_m")
+    if (mean := _num(lm, "mean")) is not None:
+        n = (lm or {}).get("n")
+        parts.append(f"landmark error mean {mean:.2f} m (max {_num(lm, 'max') or 0:.2f}"
+                     + (f", {n} fixes)" if n else ")"))
+    if (hd := _num(m.get("heading_alignment_error_deg"), "mean")) is not None:
+        parts.append(f"heading error mean {hd:.2f} deg")
+    return ", ".join(parts)
+
+
+def frame_text(r: dict) -> str:
+    """Where the optimised map sits, in plain words (the report's "gauge")."""
+    g = r.get("gauge")
+    if g == "anchors":
+        return "map frame: the building's (fixed by the anchors)"
+    if g == "floorplan":
+        return "map frame: the building's (fitted to the floor plan)"
+    ref = r.get("reference_walk")
+    return (f"map frame: that of walk {ref}" if ref else "map frame: that of the reference walk") + \
+        " (not tied to the building: no anchors, no floor plan used)"

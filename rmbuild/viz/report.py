@@ -48,12 +48,14 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("optimize", "factors.vicinity", "vicinity factors"),
     ("optimize", "linked_walks", "walks linked into the map"),
     ("optimize", "components", "connected components"),
-    ("optimize", "gauge", "gauge"),
+    ("optimize", "gauge", "map frame fixed by (se2: one walk's frame; anchors / floorplan: the building's)"),
     ("optimize", "iterations", "optimiser iterations"),
     ("optimize", "final_cost", "final cost"),
     ("optimize", "raw.ate_m.rmse", "raw PDR ATE rmse (m)"),
     ("optimize", "optimized.ate_m.rmse", "optimised ATE rmse (m)"),
+    ("optimize", "raw.landmark_error_m.mean", "raw PDR landmark error mean (m)"),
     ("optimize", "optimized.landmark_error_m.mean", "optimised landmark error mean (m)"),
+    ("optimize", "optimized.landmark_error_fitted_walks_m.mean", "optimised landmark error mean, linked walks (m)"),
     ("optimize", "time_s.stage_total", "optimise time (s)"),
     ("map", "n_cells", "radio map cells"),
     ("map", "n_aps", "radio map APs"),
@@ -125,8 +127,8 @@ def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def _fmt(v: Any) -> str:
-    if v is None:
-        return "n/a"
+    if v is None:  # a figure that could not be computed (e.g. an ATE without true paths)
+        return "not computed"
     if isinstance(v, bool):
         return "yes" if v else "no"
     if isinstance(v, float):
