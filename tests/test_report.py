@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from cli_util import run_cli
 from PIL import Image
-from test_viz_util import DOC_IMG, WRITE_DOC_IMAGES, build_workspace
+from test_viz_util import build_workspace
 
 CHROMIUM = Path("/usr/bin/chromium")  # Debian's `chromium` package (apt-get install -y chromium)
 IMG_RE = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
@@ -99,6 +99,3 @@ def test_report_renders_in_headless_chromium(ws_report: Path, tmp_path: Path, ca
     im = Image.open(shot).convert("L")
     lo, hi = im.getextrema()
     assert hi - lo > 100  # not blank
-    if WRITE_DOC_IMAGES:
-        DOC_IMG.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(shot, DOC_IMG / "report.png")

@@ -317,10 +317,13 @@ def _evaluation(ws: Workspace, ev: dict | None, missing: dict[str, str]
     if ws.exists("evaluate.errors"):
         errs = _errors_by_label(ws.read_table("evaluate.errors"))
         if errs:
+            ref = "true positions" if (ev or {}).get("reference") == "truth_poses" else \
+                "positions interpolated between the waypoints / position fixes"
             figs.append(ReportFigure("cdf", "Localization error CDFs", _png(figures.cdf_figure(errs)),
-                                     "Per test scan, error of each localizer with each map "
-                                     "(built: from the optimised walks; surveyed: from true positions; "
-                                     "raw: from raw PDR)."))
+                                     f"Per test scan, error against the {ref}, of each localizer (colour) with "
+                                     "each map (line style; built: from the optimised walks; surveyed: from "
+                                     f"the {ref}, what a site survey would give; raw: from raw PDR); grey "
+                                     "lines at 5 and 10 m."))
     rows: list[tuple[str, ...]] = []
     for mname, locs in ((ev or {}).get("maps") or {}).items():
         for lname, st in (locs or {}).items():
