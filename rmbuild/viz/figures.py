@@ -27,6 +27,18 @@ LOG_COUNT_FROM = 20
 _XY_LABELS = ("x (m)", "y (m)")
 
 
+def _wrapped(text: str, width_in: float) -> str:
+    """``text`` broken into lines that fit an axes ``width_in`` inches wide at the titles' 10 pt (constrained
+    layout makes room for the lines; it does not shorten a line wider than the figure)."""
+    import textwrap
+
+    return textwrap.fill(text, width=max(int(width_in * 13), 30))
+
+
+def _frame_words(frame: str) -> str:
+    return f"frame of walk {frame[5:]}" if frame.startswith("walk:") else f"{frame} frame"
+
+
 def _figure(width_in: float, height_in: float) -> Any:
     from matplotlib.figure import Figure
 
@@ -198,9 +210,10 @@ def coverage_figure(cells: pd.DataFrame, cell_size_m: float | None = None, walls
     im = _draw_grid(ax, grid, img, norm, walls_array(walls))
     fig.colorbar(im, ax=ax, label="scans per cell", shrink=0.85)
     _xy_axes(ax)
-    ax.set_title(f"coverage: {int((~interp).sum())} visited cells"
-                 + (f" + {int(interp.sum())} filled (grey)" if interp.any() else "")
-                 + f", {grid.s:g} m grid" + (f", {frame} frame" if frame else ""), fontsize=10)
+    ax.set_title(_wrapped(f"coverage: {int((~interp).sum())} visited cells"
+                          + (f" + {int(interp.sum())} filled (grey)" if interp.any() else "")
+                          + f", {grid.s:g} m grid" + (f", {_frame_words(frame)}" if frame else ""), 6.0),
+                 fontsize=10)
     return fig
 
 
@@ -230,7 +243,7 @@ def cdf_figure(errors: Mapping[str, np.ndarray], title: str = "localization erro
     ax.set_ylim(0, 1.01)
     ax.set_xlim(left=0)
     ax.grid(alpha=0.3)
-    ax.set_title(title, fontsize=10)
+    ax.set_title(_wrapped(title, 7.0), fontsize=10)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7.5, loc="lower right")
     return fig
@@ -260,7 +273,7 @@ def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequenc
             any_fix = True
             cols = [_rgb(order.get(str(w), 0)) for w in fx["walk_id"]]
             ax.scatter(fx["x_m"], fx["y_m"], s=22, marker="x", c=cols, lw=1.0, zorder=4)
-        ax.set_title(title, fontsize=10)
+        ax.set_title(_wrapped(title, 5.4), fontsize=10)
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel(_XY_LABELS[0])
         ax.set_ylabel(_XY_LABELS[1])
