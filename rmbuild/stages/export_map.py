@@ -14,6 +14,7 @@ from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
 from rmbuild.stages.view import log_workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
+from rmbuild.viz.align import plan_segments
 from rmbuild.viz.figures import coverage_figure, heatmaps_figure
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
@@ -53,7 +54,8 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     progress.phase("rasterising")
     rm = build_radio_map(ds.wifi, xy, ds.poses["walk_id"].astype(str).to_numpy(), cfg, frame=info["frame"])
     t_build = time.perf_counter() - t0
-    walls = ds.venue if (ds.venue is not None and info["frame"] == "building") else None
+    plan_doc = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
+    walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
     progress.phase("writing map")
     node_pos = pd.DataFrame({"node": rm.nodes.node, "walk": rm.node_walk, "x_m": rm.node_xy[:, 0],
                              "y_m": rm.node_xy[:, 1]})

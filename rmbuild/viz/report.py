@@ -222,7 +222,8 @@ def _after_panel(opt: pd.DataFrame, ds: Any, gauge: str | None, fixes: pd.DataFr
         unplaced = int(shown.loc[~shown["linked"].astype(bool), "walk_id"].nunique())
         shown = shown[shown["linked"].astype(bool)]
     if gauge in BUILDING_FRAME_GAUGES:
-        return (f"after: optimised, in the building frame (fixed by the {gauge})", shown), None, True, unplaced
+        by = "known anchor positions" if gauge == "anchors" else "the floor plan"
+        return (f"after: optimised, in the building frame (fixed by {by})", shown), None, True, unplaced
     rt = frame_to_truth(opt, ds.truth_poses, gauge)
     how = "all walks' true paths"
     if rt is None and ds.truth_poses is None:
