@@ -14,6 +14,8 @@ from cli_util import run_cli
 from PIL import Image
 from test_viz_util import build_workspace
 
+from rmbuild.io.workspace import Workspace
+
 CHROMIUM = Path("/usr/bin/chromium")  # Debian's `chromium` package (apt-get install -y chromium)
 IMG_RE = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
 
@@ -48,6 +50,14 @@ def test_report_is_self_contained(ws_report: Path, tmp_path: Path, capsys) -> No
     for needle in ("Key figures", "Configuration used", "[optimize]", "optimised ATE rmse"):
         assert needle in page
     assert "dashed grey: ground truth" in page  # the synthetic venue has true paths: the caption says so
+    # the per-walk table: one row per walk, the real error against the true paths beside the predicted one
+    block = page[page.index("<details><summary>Per walk"):]
+    block = block[:block.index("</details>")]
+    n_walks = len(Workspace.open(ws).read_table("data.walks"))
+    assert f"Per walk: {n_walks} walks" in block and "error vs truth (m)" in block
+    assert block.count("<tr>") == n_walks + 1
+    errs = [float(c) for c in re.findall(r'<td class="num">([0-9.]+)</td></tr>', block)]
+    assert len(errs) == n_walks and max(errs) < 5.0  # tiny venue, every walk linked: metres, not tens
 
 
 def test_captions_name_only_what_is_drawn(tmp_path: Path, capsys) -> None:

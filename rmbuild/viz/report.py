@@ -33,6 +33,7 @@ from rmbuild.viz.align import (
     per_walk_to_truth,
     plan_segments,
 )
+from rmbuild.viz.walk_table import real_errors, walk_rows
 
 log = logging.getLogger(__name__)
 
@@ -183,8 +184,26 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
     figs, rt = _walk_figures(ws, ds, gauge, walls, missing)
     figs += _map_figures(ws, heatmap_top_n, gauge, rt, walls, _fixes_of(ds), missing)
     eval_figs, eval_rows = _evaluation(ws, reports.get("evaluate"), missing)
-    page = _page(ws, figs + eval_figs, missing, eval_rows, reports)
+    page = _page(ws, figs + eval_figs, missing, eval_rows, reports, _walks_html(ws, ds, rt, gauge))
     return Report(page, figs + eval_figs, missing)
+
+
+def _walks_html(ws: Workspace, ds: Any, rt: Any, gauge: str | None) -> str:
+    """The per-walk table (folded: one row per walk) after the walk figures; "" before optimize."""
+    if not (ws.has("optimize") and ws.exists("optimize.walks")):
+        return ""
+    walks = ws.read_table("optimize.walks")
+    errors = real_errors(ws.read_table("optimize.poses"), ds, rt, gauge)
+    header, rows = walk_rows(walks, errors)
+    n_linked = sum(r[1] == "yes" for r in rows)
+    note = ("Placed by: how optimize put the walk in the map (Wi-Fi pairs, continuity with the previous "
+            "recording, ...); shared path: length of path it shares with other walks by Wi-Fi; predicted "
+            "error: optimize's own estimate of how far off its placement is")
+    if errors:
+        note += f"; {errors[0].split(' (')[0]}: the mean distance after the map's fit to the building"
+    return (f"<details><summary>Per walk: {len(rows)} walks, {n_linked} linked into the map "
+            f"(optimize/walks.parquet)</summary><p class=\"meta\">{html.escape(note)}.</p>"
+            f"{_table(rows, header)}</details>")
 
 
 def _plan_segments(ws: Workspace, ds: Any) -> np.ndarray | None:
@@ -364,10 +383,10 @@ def _tables_html(ws: Workspace, reports: dict[str, dict | None]) -> tuple[str, s
 
 
 def _page(ws: Workspace, figs: list[ReportFigure], missing: dict[str, str], eval_rows: list[tuple[str, ...]],
-          reports: dict[str, dict | None]) -> str:
+          reports: dict[str, dict | None], walks_html: str = "") -> str:
     by_name = {f.name: f for f in figs}
-    sections = ["<h2>Walks</h2>" + _fig_html(by_name["walks"]) + (_fig_html(by_name["cost"]) if "cost" in by_name
-                                                                   else "")]
+    sections = ["<h2>Walks</h2>" + _fig_html(by_name["walks"]) + walks_html
+                + (_fig_html(by_name["cost"]) if "cost" in by_name else "")]
     sections.append("<h2>Radio map</h2>" + (_fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
                                             else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>"))
     ev_html = "<h2>Localization</h2>"
