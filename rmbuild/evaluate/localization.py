@@ -276,8 +276,9 @@ def evaluate(
     per-node fingerprints (their ``bssids`` fix the AP order of all maps).
     ``gauge``: "se2" or one of :data:`rmbuild.types.BUILDING_FRAME_GAUGES`.
     ``map_cfg``: how the maps are rasterised (default MapConfig()). ``progress(phase, info)``: called with
-    ("maps", {"maps": n}) once the maps are built and ("localize", {"map", "localizer", "scans", "done",
-    "total", "time_s"}) after each localizer has localized every test scan with a map. Raises InputError for
+    ("maps", {"maps": n, "total"}) once the maps are built, ("localize_start", {"map", "localizer", "scans"})
+    before and ("localize", {"map", "localizer", "scans", "done", "total", "time_s"}) after each localizer
+    has localized every test scan with a map. Raises InputError for
     bad input.
     """
     cfg = cfg or EvaluateConfig()
@@ -361,6 +362,8 @@ def evaluate(
         stats[mname], errors[mname], preds[mname] = {}, {}, {}
         for lname in cfg.localizers:
             t_loc = time.perf_counter()
+            if progress:
+                progress("localize_start", {"map": mname, "localizer": lname, "scans": len(query)})
             loc = make_localizer(lname, cfg).fit(rm)
             p = np.asarray(loc.predict(query), dtype=float)
             preds[mname][lname] = p

@@ -52,6 +52,8 @@ def _progress_adapter(progress: Progress):
     def on_progress(phase: str, info: dict) -> None:
         if phase == "maps":
             progress.phase(f"localizing with {info['maps']} maps", info["total"], "scans")
+        elif phase == "localize_start":
+            progress.message(f"{info['map']} / {info['localizer']}: localizing {info['scans']} scans")
         elif phase == "localize":
             progress.advance(info["scans"])
             rate = info["scans"] / info["time_s"] if info["time_s"] > 0 else float("inf")
