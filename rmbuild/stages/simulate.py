@@ -68,7 +68,7 @@ def run(
     progress.phase("simulating venue")
     data = simulate(cfg)
     t_sim = time.perf_counter() - t0
-    progress.phase("writing files")
+    progress.message(f"{len(data.walks)} walks, {len(data.poses):,} steps, {len(data.wifi):,} Wi-Fi readings")
     imu = None
     if raw_imu:
         from rmbuild.synthetic.imu import phone_imu_table
@@ -76,6 +76,8 @@ def run(
         progress.phase("synthesising phone IMU")
         imu, phones = phone_imu_table(data.truth_poses, data.poses, cfg.seed, cfg.phone)
         data.truth_walks = data.truth_walks.merge(phones, on="walk_id", how="left")
+        progress.message(f"{len(imu):,} samples")
+    progress.phase("writing files")
     with replacing_dir(out) as tmp:
         for attr, stem in TABLE_FILES.items():
             df = getattr(data, attr, None)
