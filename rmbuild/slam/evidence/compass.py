@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
+from scipy.stats import circmean
 
 from rmbuild.config.optimize import CompassConfig
 from rmbuild.slam.evidence.base import EvidenceSource, RotationPriors, StaticFactors
@@ -81,10 +82,10 @@ def walk_rotations(walks: WalkSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sig = np.full(n_w, np.inf)
     known = np.zeros(n_w, bool)
     for w, (s, e) in enumerate(zip(walks.starts, walks.ends)):
-        z = np.exp(1j * (walks.yaw_abs[s:e] - walks.raw[s:e, 2]))
-        ok = np.isfinite(z)
+        d = walks.yaw_abs[s:e] - walks.raw[s:e, 2]
+        ok = np.isfinite(d)
         if ok.any():
-            th[w] = np.angle(z[ok].mean())
+            th[w] = circmean(d[ok], high=np.pi, low=-np.pi)
             known[w] = True
             n_ind = max(1.0, ok.sum() / ABS_HEADING_CORR_STEPS)
             sig[w] = max(ABS_HEADING_SIGMA_RAD, float(np.median(walks.yaw_sigma[s:e][ok])) / np.sqrt(n_ind))
@@ -94,5 +95,5 @@ def walk_rotations(walks: WalkSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def component_compass_offset(T: np.ndarray, walks: np.ndarray, rot: RotationPriors, ref: int) -> float:
     """Rotation (rad) that takes a component's frame to the reference's by the compass: the circular mean
     over ``walks`` (bool, trusted compass) of theta[w] - theta[ref] - T[w, 2]."""
-    return float(np.angle(np.mean(np.exp(1j * (rot.theta[walks] - rot.theta[ref] - T[walks, 2])))))
+    return float(circmean(rot.theta[walks] - rot.theta[ref] - T[walks, 2], high=np.pi, low=-np.pi))
 
