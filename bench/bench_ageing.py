@@ -167,7 +167,8 @@ def main() -> None:
           .groupby("status").head(3).drop(columns="k"))
     gone = aps[aps["status"] == "gone"]
     replaced = {"gone": len(gone), "gone_with_replacement": int((gone["replaced_by"] != "").sum()),
-                "last_month_counts": {int(k): int(v) for k, v in gone["last_month"].value_counts().sort_index().items()}}
+                "last_month_counts": {int(k): int(v)
+                                      for k, v in gone["last_month"].value_counts().sort_index().items()}}
     a5_err = {}
     for v, pm in (("static", trn[1]), ("refresh_all (month 24)", trn[24])):
         e = errors(pm, a5)
