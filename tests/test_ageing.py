@@ -133,3 +133,33 @@ def test_uji_reader_bad_value_names_file_and_line(tmp_path: Path, shared_dataset
     (d / "trn01rss.csv").write_text("\n".join(lines[:10]) + "\n")
     with pytest.raises(InputError, match="the rss file has 10"):
         read_set(tmp_path / "db", 2, "trn01")
+
+
+def test_diff_maps_reports_per_ap_changes_between_two_radio_maps() -> None:
+    import pandas as pd
+
+    from rmbuild.config import MapConfig
+    from rmbuild.radiomap import build_radio_map
+    from rmbuild.stages.diff_map import diff_maps
+
+    rng = np.random.default_rng(4)
+
+    def radio_map(month: int, frame: str = "building"):
+        rss, xy, fl = _month(month, rng)
+        keep = fl == 3
+        rss, xy = rss[keep], xy[keep]
+        r, c = np.nonzero(~np.isnan(rss))
+        wifi = pd.DataFrame({"node": r, "t_s": 0.0, "bssid": BSS[c], "rssi_dbm": rss[r, c].astype(float)})
+        return build_radio_map(wifi, xy, np.array(["w"] * len(xy)), MapConfig(cell_size_m=2.0), np.zeros(2),
+                               frame=frame)
+
+    a, b = radio_map(1), radio_map(6)
+    table, summary = diff_maps(a, b)
+    t = table.set_index("bssid")
+    assert t.loc["B", "status"] == "gone" and t.loc["B", "replaced_by"] == "F"
+    assert t.loc["C", "status"] == "appeared" and t.loc["F", "status"] == "appeared"
+    assert t.loc["D", "status"] == "moved" and 10 < t.loc["D", "location_shift_m"] < 20
+    assert t.loc["A", "status"] == "both" and abs(t.loc["A", "rss_shift_db"]) < 1.5
+    assert summary["positions_compared"] and summary["counts"]["gone"] == 1
+    _, other = diff_maps(a, radio_map(6, frame="walk:x"))
+    assert not other["positions_compared"] and "different frames" in other["note"]

@@ -207,3 +207,14 @@ def test_localize_bad_input_is_one_line_exit_2(venue: Path, tmp_path: Path, caps
         assert out.read_text() == "mine\n" and "--force" in r.err
     if case == "no_map":
         assert "export-map" in r.err
+
+
+def test_diff_map_cli(venue: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "diff.csv"
+    r = run_cli(capsys, "diff-map", venue / "ws_all", venue / "ws_map", "-o", out)
+    assert r.code == 0, r.err
+    table = pd.read_csv(out)
+    assert set(table["status"]) <= {"both", "gone", "appeared", "moved"} and (table["status"] == "both").sum() > 20
+    assert f"{len(table)} in A" in r.out or "in A" in r.out
+    r = run_cli(capsys, "diff-map", venue / "ws_all", tmp_path / "nope")
+    assert r.code == 2 and r.err.count("\n") == 1 and "not an rmbuild workspace" in r.err

@@ -60,7 +60,7 @@ def run(
     from rmbuild.localize.apply import localize_query, positions_table
     from rmbuild.localize.base import Query, localizer_class
 
-    out = _check_output(out, force)
+    out = check_output(out, force)
     name = localizer or cfg.localizers[0]
     localizer_class(name)  # an unknown name fails before anything is read
     progress = ensure_progress(progress)
@@ -82,7 +82,7 @@ def run(
     has_truth = bool(np.isfinite(ref).all(axis=1).any())
     ref_map = to_map(ref) if (has_truth and to_map is not None) else None
     table = positions_table(query, res, ref_map)
-    _write_table(table, out)
+    write_table(table, out)
     report = {
         "stage": "localize", "workspace": str(ws.root), "inputs": [str(p) for p in inputs], "output": str(out),
         "input_kind": new.kind, "format": new.reader, "walks": len(ds.walks), "scans": len(query),
@@ -102,7 +102,7 @@ def _median(a: np.ndarray) -> float | None:
     return float(np.median(a)) if a.size else None
 
 
-def _check_output(out: str | Path, force: bool) -> Path:
+def check_output(out: str | Path, force: bool) -> Path:
     p = Path(out)
     fmt = OUTPUT_FORMATS.get(p.suffix.lower())
     if fmt is None:
@@ -167,7 +167,7 @@ def truth_to_map_frame(ws: Workspace, rm: RadioMap) -> tuple[Callable[[np.ndarra
     return (lambda b: (np.asarray(b, dtype=float) - t) @ r), note
 
 
-def _write_table(df: pd.DataFrame, out: Path) -> None:
+def write_table(df: pd.DataFrame, out: Path) -> None:
     """Write ``df`` to ``out`` (CSV or Parquet by suffix) through a temporary file: never half written."""
     from rmbuild.io.atomic import write_bytes_atomic
 
