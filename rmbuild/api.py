@@ -115,14 +115,10 @@ class MapWorkspace:
 
 def open_workspace(root: str | Path) -> MapWorkspace:
     """Open an existing workspace for reading; WorkspaceError when ``root`` is not one."""
-    with workspace_lock(root, "api", exclusive=False) if Path(root).is_dir() else _nothing():
-        Workspace.open(root)
-    return MapWorkspace(root)
-
-
-@contextmanager
-def _nothing() -> Iterator[None]:
-    yield
+    ws = MapWorkspace(root)
+    with ws._reading():
+        pass
+    return ws
 
 
 def read_walks(inputs: Sequence[str | Path], workspace: MapWorkspace | None = None, fmt: str | None = None,

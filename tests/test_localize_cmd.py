@@ -218,3 +218,21 @@ def test_diff_map_cli(venue: Path, tmp_path: Path, capsys) -> None:
     assert f"{len(table)} in A" in r.out or "in A" in r.out
     r = run_cli(capsys, "diff-map", venue / "ws_all", tmp_path / "nope")
     assert r.code == 2 and r.err.count("\n") == 1 and "not an rmbuild workspace" in r.err
+
+
+def test_api_errors_and_walks_table(venue: Path, tmp_path: Path) -> None:
+    from rmbuild import api
+    from rmbuild.errors import InputError, WorkspaceError
+
+    with pytest.raises(WorkspaceError, match="not an rmbuild workspace"):
+        api.open_workspace(tmp_path / "nope")
+    ws = api.open_workspace(venue / "ws_all")
+    walks = ws.walks()
+    assert list(walks.columns[:3]) == ["walk_id", "step", "node"] and (walks["node"] == np.arange(len(walks))).all()
+    err = np.hypot(walks["x_m"] - walks["x_true_m"], walks["y_m"] - walks["y_true_m"])
+    assert err.notna().all()  # true poses ride along (in the building frame, the estimate in the map's)
+    with pytest.raises(InputError, match="unknown walk 'w999'"):
+        ws.scans(["w999"])
+    q = ws.scans(["w004"], ws.radio_map())
+    assert len(q) == 13 and q.steps is not None and len(q.steps["w004"]) > 10
+    assert "knn" in api.localizer_names() and "slac" in api.localizer_names()
