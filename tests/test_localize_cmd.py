@@ -236,3 +236,18 @@ def test_api_errors_and_walks_table(venue: Path, tmp_path: Path) -> None:
     q = ws.scans(["w004"], ws.radio_map())
     assert len(q) == 13 and q.steps is not None and len(q.steps["w004"]) > 10
     assert "knn" in api.localizer_names() and "slac" in api.localizer_names()
+
+
+def test_a_scan_hearing_no_map_ap_gets_no_estimate(venue: Path, tmp_path: Path, capsys) -> None:
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    wifi = pd.read_csv(venue / "test_in" / "wifi.csv")
+    stranger = pd.DataFrame({"walk_id": "w004", "t_s": 999.0, "bssid": "02:00:00:00:00:01", "rssi_dbm": -50.0},
+                            index=[0])
+    pd.concat([wifi[["walk_id", "t_s", "bssid", "rssi_dbm"]], stranger]).to_csv(scans / "wifi.csv", index=False)
+    out = tmp_path / "pos.csv"
+    r = run_cli(capsys, "localize", "-w", venue / "ws_map", scans, "-o", out)
+    assert r.code == 0, r.err
+    assert "1 without an estimate" in r.out
+    t = pd.read_csv(out).set_index("t_s")
+    assert np.isnan(t.loc[999.0, "x_m"]) and t.loc[999.0, "n_aps"] == 0 and t["x_m"].notna().sum() == len(t) - 1

@@ -57,14 +57,17 @@ def neighbourhood_spread(ref: RadioMap | ReferenceSet, query: Query, xy: np.ndar
 
 def localize_query(rm: RadioMap, query: Query, name: str, cfg: EvaluateConfig | None = None) -> Localized:
     """Fit the registered localizer ``name`` (configured by ``cfg``, an EvaluateConfig) on ``rm`` and
-    localize every scan of ``query``; raises InputError for an unknown name or bad config."""
+    localize every scan of ``query`` (a scan hearing none of the map's APs gets no estimate: NaN); raises
+    InputError for an unknown name or bad config."""
     cfg = cfg or EvaluateConfig()
     loc = make_localizer(name, cfg).fit(rm)
     q = query.aligned(rm.bssids)
     xy = np.asarray(loc.predict(q), dtype=np.float64)
+    n_aps = (~np.isnan(q.rss_dbm)).sum(axis=1).astype(np.int64)
+    xy[n_aps == 0] = np.nan  # a scan that heard none of the map's APs says nothing about where it was
     unc = neighbourhood_spread(rm, q, xy, cfg)
     unc[~np.isfinite(xy).all(axis=1)] = np.nan
-    return Localized(name, xy, unc, (~np.isnan(q.rss_dbm)).sum(axis=1).astype(np.int64), loc.summary())
+    return Localized(name, xy, unc, n_aps, loc.summary())
 
 
 def positions_table(query: Query, res: Localized, ref_xy: np.ndarray | None = None) -> pd.DataFrame:

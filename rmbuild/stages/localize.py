@@ -69,19 +69,18 @@ def run(
         rm = _read_map(ws)
         progress.phase("reading the input")
         new = read_input(inputs, fmt, *ingest_configs(ws))
-        to_map, frame_note = truth_to_map_frame(ws, rm)
-    ds = new.dataset
-    query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
-    if new.kind == "scans":
-        query.steps = None
-    if len(query) == 0:
-        raise InputError("the input has no Wi-Fi scans", ", ".join(map(str, inputs)))
+        ds = new.dataset
+        query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
+        if new.kind == "scans":
+            query.steps = None
+        if len(query) == 0:
+            raise InputError("the input has no Wi-Fi scans", ", ".join(map(str, inputs)))
+        ref = query_reference_xy(ds, query)
+        has_truth = bool(np.isfinite(ref).all(axis=1).any())
+        to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
     progress.phase(f"localizing {len(query)} scans with {name}")
     res = localize_query(rm, query, name, cfg)
-    ref = query_reference_xy(ds, query)
-    has_truth = bool(np.isfinite(ref).all(axis=1).any())
-    ref_map = to_map(ref) if (has_truth and to_map is not None) else None
-    table = positions_table(query, res, ref_map)
+    table = positions_table(query, res, to_map(ref) if to_map is not None else None)
     write_table(table, out)
     report = {
         "stage": "localize", "workspace": str(ws.root), "inputs": [str(p) for p in inputs], "output": str(out),
