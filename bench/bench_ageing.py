@@ -1,7 +1,7 @@
 """A map that ages: UJI long-term (25 monthly collections of one library), a map from month 1 against the
 tests of every later month, per-AP change detection, and an update rule from newer data.
 Writes bench/results/ageing.json and bench/results/ageing.md.
-Run: ``nice -n 10 python -m bench.bench_ageing`` (about a minute).
+Run: ``nice -n 10 python -m bench.bench_ageing`` (about seven minutes on the shared 2-core machine).
 
 * **Map**: month 1's training data (15 sets: 48 surveyed points x 12 samples each, x 15; the 6 rows of
   ``trn14`` with floor 0, a known glitch, left out), one RP per point (:func:`point_map`); the floor is
@@ -77,8 +77,9 @@ def errors(pm, tests) -> np.ndarray:
     return np.concatenate(out)
 
 
-def run_updates(trn, tst) -> tuple[dict, dict]:
-    """Per variant and month: mean / median / p90 error (m), and the map's state (RP ages, APs)."""
+def run_updates(trn, tst, gone_after: int = GONE_AFTER, share: float = HALF) -> tuple[dict, dict]:
+    """Per variant and month: mean / median / p90 error (m), and the map's state (RP ages, APs).
+    ``gone_after``: months unheard before an AP is dropped; ``share``: of the points seen again a month."""
     from rmbuild.radiomap.ageing import drop_aps, heard, refresh
 
     rng = np.random.default_rng(SEED)
@@ -91,14 +92,14 @@ def run_updates(trn, tst) -> tuple[dict, dict]:
     for m in MONTHS:
         if m > 1:
             new = trn[m - 1]
-            half = new.rows(np.sort(rng.choice(len(new), int(round(HALF * n_pts)), replace=False)))
+            half = new.rows(np.sort(rng.choice(len(new), int(round(share * n_pts)), replace=False)))
             state["refresh_all"] = refresh(state["refresh_all"], new)
             state["refresh_half"] = refresh(state["refresh_half"], half)
             heard_hist["drop"].append(heard(new))
             heard_hist["refresh_half+drop"].append(heard(half))
             for v, base_v in (("drop", base), ("refresh_half+drop", state["refresh_half"])):
-                recent = heard_hist[v][-GONE_AFTER:]
-                gone = ~np.any(recent, axis=0) if len(recent) == GONE_AFTER else np.zeros(len(base.bssids), bool)
+                recent = heard_hist[v][-gone_after:]
+                gone = ~np.any(recent, axis=0) if len(recent) == gone_after else np.zeros(len(base.bssids), bool)
                 state[v] = drop_aps(base_v, gone)
         for v, pm in state.items():
             e = errors(pm, tst[m])
@@ -106,6 +107,25 @@ def run_updates(trn, tst) -> tuple[dict, dict]:
                            "p90": float(np.nanpercentile(e, 90)), "n": int(np.isfinite(e).sum())}
             info[v][m] = {"aps_in_map": int(heard(pm).sum()), "rp_age_months_mean": float(np.mean(m - pm.month))}
     return curve, info
+
+
+def sweep(trn, tst) -> dict:
+    """Mean error (m) over months 2-10 and 11-25 of ``drop`` for several N and of ``refresh_half+drop`` for
+    several shares of the points seen again a month (the choices of GONE_AFTER and HALF)."""
+
+    def means(curve: dict) -> dict:
+        return {p: round(float(np.mean([curve[m]["mean"] for m in r])), 3)
+                for p, r in (("2-10", range(2, 11)), ("11-25", range(11, 26)))}
+
+    out: dict = {"drop": {}, "refresh+drop": {}}
+    for n in (1, 2, 3, 6):
+        c, _ = run_updates(trn, tst, gone_after=n)
+        out["drop"][f"N={n}"] = means(c["drop"])
+    for share in (0.1, 0.25, 0.5):
+        c, _ = run_updates(trn, tst, share=share)
+        out["refresh+drop"][f"share={share}"] = {"refresh": means(c["refresh_half"]),
+                                                 "refresh+drop": means(c["refresh_half+drop"])}
+    return out
 
 
 def md(out: dict) -> list[str]:
@@ -124,6 +144,14 @@ def md(out: dict) -> list[str]:
               "| variant | mean | median |", "|---|---|---|"]
     for v, e in out["a5_month25"].items():
         lines.append(f"| {v} | {e['mean']:.2f} | {e['median']:.2f} |")
+    sw = out["sweep"]
+    lines += ["", "## The rule's two parameters (mean error in m, months 2-10 / 11-25)", "",
+              "| drop APs unheard for N months (no refresh) | 2-10 | 11-25 |", "|---|---|---|"]
+    lines += [f"| {k} | {v['2-10']:.2f} | {v['11-25']:.2f} |" for k, v in sw["drop"].items()]
+    lines += ["", "| share of points seen again a month | refresh 2-10 | refresh 11-25 | refresh + drop (N = 3) "
+              "11-25 |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['refresh']['2-10']:.2f} | {v['refresh']['11-25']:.2f} | {v['refresh+drop']['11-25']:.2f} |"
+              for k, v in sw["refresh+drop"].items()]
     s = out["ap_changes"]["counts"]
     lines += ["", "## AP changes: month 1 vs the last 3 months each AP was heard (monthly training sets)", "",
               "| status | APs |", "|---|---|"] + [f"| {k} | {n} |" for k, n in s.items()]
@@ -160,6 +188,7 @@ def main() -> None:
         return
     trn, tst, a5 = load()
     curve, info = run_updates(trn, tst)
+    sw = sweep(trn, tst)
     aps = classify_aps(trn, gone_after=GONE_AFTER)
     counts = aps["status"].value_counts().to_dict()
     ex = (aps[aps["status"] != "stable"].assign(k=lambda d: d["status"].map(
@@ -176,7 +205,7 @@ def main() -> None:
     out = {"setup": __doc__.split("\n\n")[1] if __doc__ else "", "k": K, "gone_after_months": GONE_AFTER,
            "curve": {v: {str(m): s for m, s in d.items()} for v, d in curve.items()},
            "map_state": {v: {str(m): s for m, s in d.items()} for v, d in info.items()},
-           "a5_month25": a5_err,
+           "a5_month25": a5_err, "sweep": sw,
            "ap_changes": {"counts": {str(k): int(n) for k, n in counts.items()},
                           "replaced": replaced, "examples": ex.replace({np.nan: None}).to_dict("records"),
                           "aps": aps.replace({np.nan: None}).to_dict("records")},
