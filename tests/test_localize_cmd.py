@@ -251,3 +251,10 @@ def test_a_scan_hearing_no_map_ap_gets_no_estimate(venue: Path, tmp_path: Path, 
     assert "1 without an estimate" in r.out
     t = pd.read_csv(out).set_index("t_s")
     assert np.isnan(t.loc[999.0, "x_m"]) and t.loc[999.0, "n_aps"] == 0 and t["x_m"].notna().sum() == len(t) - 1
+
+
+def test_localizing_walks_of_the_map_warns(venue: Path, tmp_path: Path, capsys) -> None:
+    r = run_cli(capsys, "localize", "-w", venue / "ws_all", venue / "test_in", "-o", tmp_path / "p.csv")
+    assert r.code == 0 and "among the map's own walks (w004)" in r.err
+    r = run_cli(capsys, "localize", "-w", venue / "ws_map", venue / "test_in", "-o", tmp_path / "q.csv")
+    assert r.code == 0 and "own walks" not in r.err

@@ -15,6 +15,7 @@ into the map's frame and each scan's error is written beside its estimate:
 from __future__ import annotations
 
 import io
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +30,8 @@ from rmbuild.io.workspace import Workspace, check_output_file
 from rmbuild.radiomap.build import RadioMap
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.types import Dataset
+
+log = logging.getLogger(__name__)
 
 #: output suffix -> table format
 OUTPUT_FORMATS = {".csv": "csv", ".parquet": "parquet"}
@@ -78,6 +81,9 @@ def run(
         ref = query_reference_xy(ds, query)
         has_truth = bool(np.isfinite(ref).all(axis=1).any())
         to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
+    warnings = _overlap_warning(ds, rm)
+    for w in warnings:
+        log.warning(w)
     progress.phase(f"localizing {len(query)} scans with {name}")
     res = localize_query(rm, query, name, cfg)
     table = positions_table(query, res, to_map(ref) if to_map is not None else None)
@@ -91,9 +97,18 @@ def run(
         "uncertainty_m_median": _median(res.uncertainty_m), "localizer_summary": res.summary,
         "truth": {"present": has_truth, "frame": frame_note if has_truth else None},
         "errors": error_stats(table["error_m"].to_numpy()) if "error_m" in table else None,
-        "time_s": round(time.perf_counter() - t0, 3),
+        "warnings": warnings, "time_s": round(time.perf_counter() - t0, 3),
     }
     return report
+
+
+def _overlap_warning(ds: Dataset, rm: RadioMap) -> list[str]:
+    """A warning when input walks are among the map's own walks (their scans are in the map)."""
+    both = sorted(set(ds.walks["walk_id"].astype(str)) & set(map(str, rm.node_walk)))
+    if not both:
+        return []
+    return [f"{len(both)} input walk(s) are among the map's own walks ({', '.join(both[:3])}"
+            f"{' ...' if len(both) > 3 else ''}): their scans are in the map, so their errors are optimistic"]
 
 
 def _median(a: np.ndarray) -> float | None:
