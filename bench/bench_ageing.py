@@ -1,6 +1,6 @@
 """A map that ages: UJI long-term (25 monthly collections of one library), a map from month 1 against the
 tests of every later month, per-AP change detection, and an update rule from newer data.
-Writes bench/results/ageing.json and bench/results/ageing.md.
+Writes bench/results/ageing.json, ageing.md and ageing_aps.csv (the per-AP verdicts with their evidence).
 Run: ``nice -n 10 python -m bench.bench_ageing`` (about seven minutes on the shared 2-core machine).
 
 * **Map**: month 1's training data (15 sets: 48 surveyed points x 12 samples each, x 15; the 6 rows of
@@ -208,9 +208,10 @@ def main() -> None:
            "a5_month25": a5_err, "sweep": sw,
            "ap_changes": {"counts": {str(k): int(n) for k, n in counts.items()},
                           "replaced": replaced, "examples": ex.replace({np.nan: None}).to_dict("records"),
-                          "aps": aps.replace({np.nan: None}).to_dict("records")},
+                          "aps": "ageing_aps.csv (one row per AP, the columns of classify_aps)"},
            "time_s": round(time.perf_counter() - t0, 1)}
     p = write_result("ageing", out)
+    aps.to_csv(RESULTS / "ageing_aps.csv", index=False, float_format="%.2f")
     (RESULTS / "ageing.md").write_text("\n".join(md(out)) + "\n")
     print("\n".join(md(out)))
     print(p)
