@@ -1,0 +1,193 @@
+"""`rmbuild localize`: localize new walks or bare scans against a workspace's radio map.
+
+The inputs are read with the ingest readers into memory (the workspace is never written): walks go
+through the same PDR and attachment as the map's walks (the workspace's [ingest] and [pdr] config), and
+every scan becomes one query, as `evaluate` makes them. The map is the one export-map wrote. Positions are
+in the map's frame; when the input has ground truth (truth poses, or fixes), its positions are brought
+into the map's frame and each scan's error is written beside its estimate:
+
+* map in the building frame (optimize used anchors or the floor plan): as they are;
+* map in a walk's frame: by the one SE(2) that maps the workspace's optimised node positions onto its
+  own reference positions (fitted on every placed node, as `evaluate` fits its gauge), inverted;
+* otherwise (no ground truth in the workspace) errors are not computed, and the report says why.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.config import EvaluateConfig, IngestConfig, PdrConfig, load_stage_config_text
+from rmbuild.errors import InputError
+from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.radiomap.build import RadioMap
+from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
+from rmbuild.types import Dataset
+
+log = logging.getLogger(__name__)
+
+#: output suffix -> table format
+OUTPUT_FORMATS = {".csv": "csv", ".parquet": "parquet"}
+
+
+@dataclass
+class NewInput:
+    """New data read into memory: a Dataset (poses empty for bare scans) and what was read."""
+
+    dataset: Dataset
+    kind: str  # "walks" or "scans"
+    reader: str
+    n_files: int
+
+
+def run(
+    workspace: str | Path,
+    inputs: list[str | Path],
+    out: str | Path,
+    cfg: EvaluateConfig,
+    localizer: str | None = None,
+    fmt: str | None = None,
+    force: bool = False,
+    progress: Progress | None = None,
+) -> dict:
+    """Localize ``inputs`` against ``workspace``'s map, write per-scan positions to ``out`` (CSV or Parquet
+    by suffix); returns the report (errors under "errors" when the input has ground truth)."""
+    from rmbuild.evaluate.localization import error_stats, query_reference_xy
+    from rmbuild.localize.apply import localize_query, positions_table
+    from rmbuild.localize.base import Query, localizer_class
+
+    out = check_output(out, force)
+    name = localizer or cfg.localizers[0]
+    localizer_class(name)  # an unknown name fails before anything is read
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    with locked_workspace(workspace, "localize", exclusive=False) as ws:
+        rm = _read_map(ws)
+        progress.phase("reading the input")
+        new = read_input(inputs, fmt, *ingest_configs(ws))
+        ds = new.dataset
+        query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
+        if new.kind == "scans":
+            query.steps = None
+        if len(query) == 0:
+            raise InputError("the input has no Wi-Fi scans", ", ".join(map(str, inputs)))
+        ref = query_reference_xy(ds, query)
+        has_truth = bool(np.isfinite(ref).all(axis=1).any())
+        to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
+    warnings = _overlap_warning(ds, rm)
+    for w in warnings:
+        log.warning(w)
+    progress.phase(f"localizing {len(query)} scans with {name}")
+    res = localize_query(rm, query, name, cfg)
+    table = positions_table(query, res, to_map(ref) if to_map is not None else None)
+    write_table(table, out)
+    report = {
+        "stage": "localize", "workspace": str(ws.root), "inputs": [str(p) for p in inputs], "output": str(out),
+        "input_kind": new.kind, "format": new.reader, "walks": len(ds.walks), "scans": len(query),
+        "localizer": name, "map_frame": rm.frame, "map_aps": len(rm.bssids),
+        "scans_without_map_aps": int((res.n_aps == 0).sum()),
+        "unlocalized": int((~np.isfinite(res.xy).all(axis=1)).sum()),
+        "uncertainty_m_median": _median(res.uncertainty_m), "localizer_summary": res.summary,
+        "truth": {"present": has_truth, "frame": frame_note if has_truth else None},
+        "errors": error_stats(table["error_m"].to_numpy()) if "error_m" in table else None,
+        "warnings": warnings, "time_s": round(time.perf_counter() - t0, 3),
+    }
+    return report
+
+
+def _overlap_warning(ds: Dataset, rm: RadioMap) -> list[str]:
+    """A warning when input walks are among the map's own walks (their scans are in the map)."""
+    both = sorted(set(ds.walks["walk_id"].astype(str)) & set(map(str, rm.node_walk)))
+    if not both:
+        return []
+    return [f"{len(both)} input walk(s) are among the map's own walks ({', '.join(both[:3])}"
+            f"{' ...' if len(both) > 3 else ''}): their scans are in the map, so their errors are optimistic"]
+
+
+def _median(a: np.ndarray) -> float | None:
+    a = a[np.isfinite(a)]
+    return float(np.median(a)) if a.size else None
+
+
+def check_output(out: str | Path, force: bool) -> Path:
+    p = Path(out)
+    fmt = OUTPUT_FORMATS.get(p.suffix.lower())
+    if fmt is None:
+        raise InputError(f"output must end in {' or '.join(OUTPUT_FORMATS)}", str(p))
+    if not p.parent.is_dir():
+        raise InputError("the output's directory does not exist", str(p))
+    return check_output_file(p, force, "output")
+
+
+def _read_map(ws: Workspace) -> RadioMap:
+    from rmbuild.io.map_store import read_radio_map
+
+    return read_radio_map(ws)
+
+
+def ingest_configs(ws: Workspace) -> tuple[IngestConfig, PdrConfig]:
+    """The [ingest] and [pdr] config the workspace's walks were read with (defaults when not recorded)."""
+    text = ws.read_config_text("ingest")
+    if text is None:
+        return IngestConfig(), PdrConfig()
+    where = str(ws.path("data.config"))
+    return load_stage_config_text("ingest", text, where), load_stage_config_text("pdr", text, where)
+
+
+def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConfig, pdr_cfg: PdrConfig) -> NewInput:
+    """Read walks (any ingest format) or bare scans (rmbuild's schema without poses) into memory."""
+    from rmbuild.ingest_core import build_dataset
+    from rmbuild.io.formats import choose_reader, expand_inputs
+    from rmbuild.io.scans import are_bare_scans, read_bare_scans
+
+    files = expand_inputs(inputs)
+    if fmt in (None, "rmbuild") and are_bare_scans(files):
+        return NewInput(read_bare_scans(files, ingest_cfg), "scans", "rmbuild", len(files))
+    reader = choose_reader(files, fmt, pdr_cfg)
+    raw = reader.read(files, ingest_cfg)
+    ds, _, _ = build_dataset(raw, ingest_cfg, source=reader.name, pdr_cfg=pdr_cfg)
+    return NewInput(ds, "walks", reader.name, len(files))
+
+
+def truth_to_map_frame(ws: Workspace, rm: RadioMap) -> tuple[Callable[[np.ndarray], np.ndarray] | None, str]:
+    """(function taking building-frame (n, 2) positions into the map's frame, or None; a note saying how)."""
+    from rmbuild.evaluate.localization import reference_positions
+    from rmbuild.evaluate.trajectory import align_se2
+    from rmbuild.io.map_store import read_map_config
+    from rmbuild.stages.mapping import built_positions
+
+    if rm.frame == "building":
+        return (lambda xy: xy), "building (the map's own frame)"
+    ds = ws.read_dataset()
+    ref, src = reference_positions(ds)
+    if src is None:
+        return None, (f"the map is in the frame {rm.frame!r} and the workspace has no ground truth to relate it to "
+                      "the building frame: errors not computed")
+    xy, _ = built_positions(ws, ds, read_map_config(ws))
+    ok = np.isfinite(xy).all(axis=1) & np.isfinite(ref).all(axis=1)
+    if ok.sum() < 2:
+        return None, "fewer than 2 placed nodes with ground truth in the workspace: errors not computed"
+    r, t = align_se2(xy[ok], ref[ok])  # building = r @ map + t
+    res = np.hypot(*(xy[ok] @ r.T + t - ref[ok]).T)
+    note = (f"SE(2) from the workspace's {int(ok.sum())} placed nodes to their {src} "
+            f"(residual RMS {float(np.sqrt((res ** 2).mean())):.2f} m), inverted")
+    return (lambda b: (np.asarray(b, dtype=float) - t) @ r), note
+
+
+def write_table(df: pd.DataFrame, out: Path) -> None:
+    """Write ``df`` to ``out`` (CSV or Parquet by suffix) through a temporary file: never half written."""
+    from rmbuild.io.atomic import write_bytes_atomic
+
+    buf = io.BytesIO()
+    if OUTPUT_FORMATS[out.suffix.lower()] == "parquet":
+        df.to_parquet(buf, index=False)
+    else:
+        buf.write(df.to_csv(index=False, float_format="%.4f").encode("utf-8"))
+    write_bytes_atomic(out, buf.getvalue())
