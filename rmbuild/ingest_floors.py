@@ -124,12 +124,22 @@ def _floor_input(raw: RawInput, floor: str, segs: list[tuple[str, tuple[str, flo
             where[name] = _shifted(raw.where[name], rows)
     own = {w for w, _ in segs}
     seg_ids = {w: s[0] for w, s in segs if s[0] == w}  # walks kept whole keep their raw IMU
-    extra = {k: v[v["walk_id"].astype(str).isin(own)].reset_index(drop=True) if "walk_id" in v else v
-             for k, v in raw.truth_extra.items()}
+    extra = {k: _truth_part(v, floor, own) for k, v in raw.truth_extra.items()}
+    aps = _truth_part(raw.truth_aps, floor, own) if raw.truth_aps is not None else None
     return replace(raw, walks=tables["walks"], poses=tables["poses"], wifi=tables["wifi"], fixes=tables["fixes"],
-                   truth_poses=tables.get("truth_poses"), truth_extra=extra, where=where,
+                   truth_poses=tables.get("truth_poses"), truth_extra=extra, truth_aps=aps, where=where,
                    imu={w: v for w, v in raw.imu.items() if w in seg_ids}, skipped={}, notes=[],
                    floorplan=raw.floorplans.get(floor) if raw.floorplans else raw.floorplan, floorplans={})
+
+
+def _truth_part(df: pd.DataFrame, floor: str, walks: set[str]) -> pd.DataFrame:
+    """A truth table's rows of one floor: by its ``floor`` column (dropped), else by walk, else all."""
+    if FLOOR_COLUMN in df:
+        keep = df[FLOOR_COLUMN].astype(str) == floor
+        return df[keep].drop(columns=[FLOOR_COLUMN]).reset_index(drop=True)
+    if "walk_id" in df:
+        return df[df["walk_id"].astype(str).isin(walks)].reset_index(drop=True)
+    return df
 
 
 def _rows_of(df: pd.DataFrame, segs: list[tuple[str, tuple[str, float, float]]],

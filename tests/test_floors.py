@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -79,33 +80,26 @@ def test_a_walk_without_floor_among_floors_is_an_error(tmp_path: Path) -> None:
 
 # ---------------------------------------------------------------- a synthetic building of two floors
 def _two_floor_input(base: Path) -> dict[str, Path]:
-    """Two tiny venues (seeds 5 and 6) as floors F1 and F2 of one input, and each alone."""
-    dirs = {}
-    for name, seed in (("F1", 5), ("F2", 6)):
-        simulate.run(base / f"sim{name}", preset_config("tiny", seed))
-        dirs[name] = base / f"sim{name}"
-    both = base / "both"
-    (both / "truth").mkdir(parents=True)
-    alone = {}
-    for name, d in dirs.items():
-        tables = {}
-        for f in sorted(d.rglob("*.csv")):
-            df = pd.read_csv(f, dtype={"walk_id": str})
-            if "walk_id" in df:
-                df["walk_id"] = name + df["walk_id"]
-            tables[str(f.relative_to(d))] = df
-        alone[name] = base / f"alone{name}"
+    """A simulated building of two tiny floors (each floor's APs heard on the other through the floor), and
+    each floor's part of its files alone."""
+    cfg = preset_config("tiny", 5)
+    cfg = replace(cfg, building=replace(cfg.building, floors=2))
+    simulate.run(base / "both", cfg)
+    out = {"both": base / "both"}
+    tables = {str(f.relative_to(base / "both")): pd.read_csv(f, dtype={"walk_id": str, "floor": str})
+              for f in sorted((base / "both").rglob("*.csv"))}
+    for name in ("F1", "F2"):
+        walks = set(tables["walks.csv"].loc[tables["walks.csv"]["floor"] == name, "walk_id"])
+        out[name] = base / name
         for rel, df in tables.items():
-            (alone[name] / rel).parent.mkdir(parents=True, exist_ok=True)
-            df.to_csv(alone[name] / rel, index=False)
-        shutil.copy(d / "truth" / "venue.json", alone[name] / "truth" / "venue.json")
-        tables["walks.csv"]["floor"] = name
-        for rel, df in tables.items():
-            out = both / rel
-            out.parent.mkdir(parents=True, exist_ok=True)
-            df.to_csv(out, index=False, mode="a", header=not out.exists())
-    shutil.copy(dirs["F1"] / "truth" / "venue.json", both / "truth" / "venue.json")
-    return {"both": both, **alone}
+            if "floor" in df and rel != "walks.csv":
+                df = df[df["floor"] == name].drop(columns=["floor"])
+            elif "walk_id" in df:
+                df = df[df["walk_id"].isin(walks)]
+            (out[name] / rel).parent.mkdir(parents=True, exist_ok=True)
+            df.to_csv(out[name] / rel, index=False)
+        shutil.copy(base / "both" / "truth" / "venue.json", out[name] / "truth" / "venue.json")
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -183,7 +177,7 @@ def test_cli_on_a_building(building: dict[str, Path], tmp_path: Path, capsys: py
 
 
 # ---------------------------------------------------------------- real data: a site at once = its floors
-def _ilc_subset(base: Path, site: str, per_floor: int = 3) -> dict[str, Path]:
+def _ilc_subset(base: Path, site: str, per_floor: int = 2) -> dict[str, Path]:
     """The first ``per_floor`` traces of each floor of an ILC site (with the floor's companion files)."""
     src = SHARED_DATASETS / "msft-ilc20" / "data" / site
     out = {}
@@ -209,3 +203,17 @@ def test_ilc_site_ingest_equals_floor_by_floor(shared_datasets: Path, tmp_path: 
         for k in ("walks", "poses", "readings", "scans", "aps", "nodes_with_fingerprint"):
             assert got[k] == one[k], (name, k)
         assert got["floorplan"]["name"] == name
+
+
+def test_simulated_building_hears_other_floors_through_the_floor() -> None:
+    from rmbuild.synthetic.building import simulate_building
+
+    cfg = preset_config("tiny", 3)
+    d = simulate_building(replace(cfg, building=replace(cfg.building, floors=2, floor_attenuation_db=15.0)))
+    assert set(d.walks["floor"]) == {"F1", "F2"} and d.walks["walk_id"].is_unique
+    ap_floor = d.truth_aps.set_index("bssid")["floor"]
+    walk_floor = d.walks.set_index("walk_id")["floor"]
+    w = d.wifi.assign(ap=d.wifi["bssid"].map(ap_floor), at=d.wifi["walk_id"].map(walk_floor))
+    own, other = w[w["ap"] == w["at"]], w[w["ap"] != w["at"]]
+    assert len(other) > 0.05 * len(own)  # the floor damps, it does not silence
+    assert other["rssi_dbm"].median() < own["rssi_dbm"].median() - 5.0
