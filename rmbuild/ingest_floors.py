@@ -61,6 +61,23 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     return {f: _floor_input(raw, f, [(w, s) for w, ff, s in segments if ff == f]) for f in floors}
 
 
+def barometer_warnings(raw: RawInput) -> list[str]:
+    """Walks whose barometer says they changed floor, when the input gives no floors (they are mapped as
+    one floor: a warning each). Call before :func:`split_floors`, which consumes the floor columns."""
+    if FLOOR_COLUMN in raw.walks or FLOOR_COLUMN in raw.poses:
+        return []
+    from rmbuild.pdr.baro import floor_changes
+
+    out = []
+    for wid, (t, p) in raw.pressure.items():
+        ch = floor_changes(t, p)
+        if ch:
+            what = ", ".join(f"{c.dh_m:+.1f} m at {c.t_start_s:.0f}-{c.t_end_s:.0f} s" for c in ch[:3])
+            out.append(f"walk {wid!r}: the barometer says it changed floor ({what}); without a floor column "
+                       "its parts are mapped as one floor")
+    return out
+
+
 def _walk_floors(raw: RawInput) -> dict[str, str] | None:
     if FLOOR_COLUMN not in raw.walks:
         return None

@@ -12,7 +12,7 @@ from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
-from rmbuild.ingest_floors import floor_level, split_floors
+from rmbuild.ingest_floors import barometer_warnings, floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floorplan import MIN_FIXES_INSIDE, fixes_inside_share, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
@@ -76,6 +76,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     progress.phase(f"reading {len(files)} file(s) as {reader.name}")
     raw = reader.read(files, cfg)
     t_read = time.perf_counter() - t0
+    baro = barometer_warnings(raw)
     floors = split_floors(raw)
     if floors is not None:
         return _run_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, plan, raw,
@@ -83,6 +84,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
     ds, fp, summary, plan = _build(raw, cfg, reader.name, pdr_cfg, plan)
+    summary["warnings"].extend(baro)
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
     progress.phase("writing workspace")

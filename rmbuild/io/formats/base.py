@@ -86,6 +86,8 @@ class RawInput:
     floorplan: dict | None = None
     #: floor name -> its plan, for an input of several floors (``floor`` columns, rmbuild/ingest_floors.py)
     floorplans: dict[str, dict] = field(default_factory=dict)
+    #: walk_id -> (times s, pressure hPa) of its barometer, when the format has one (floor changes)
+    pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 class Reader(ABC):
