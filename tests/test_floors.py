@@ -217,3 +217,22 @@ def test_simulated_building_hears_other_floors_through_the_floor() -> None:
     own, other = w[w["ap"] == w["at"]], w[w["ap"] != w["at"]]
     assert len(other) > 0.05 * len(own)  # the floor damps, it does not silence
     assert other["rssi_dbm"].median() < own["rssi_dbm"].median() - 5.0
+
+
+def test_floor_filter_smooths_an_outlier_and_follows_a_change() -> None:
+    from rmbuild.localize.floor import classify_floors
+
+    rng = np.random.default_rng(1)
+    n_ap = 12  # APs 0-5 loud on floor 0, 6-11 on floor 1; each floor hears the other's 15 dB lower
+
+    def scans(floor: int, n: int) -> np.ndarray:
+        mean = np.where((np.arange(n_ap) < 6) == (floor == 0), -60.0, -75.0)
+        return mean + rng.normal(0.0, 3.0, (n, n_ap))
+
+    refs = [scans(0, 40), scans(1, 40)]
+    q = np.vstack([scans(0, 10), scans(1, 1), scans(0, 9), scans(1, 10)])  # an outlier scan, then a change
+    truth = np.r_[np.zeros(10), 1, np.zeros(9), np.ones(10)].astype(int)
+    pred, alone = classify_floors(refs, q, np.zeros(len(q), dtype=object), np.arange(len(q), dtype=float))
+    assert (alone == truth).all()  # each scan alone is clear
+    assert pred[10] == 0 and (pred[:20] == 0).all()  # one scan does not move the walk to another floor
+    assert (pred[22:] == 1).all()  # a lasting change is followed within two scans

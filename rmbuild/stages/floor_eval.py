@@ -88,13 +88,14 @@ def _scored(floor: str, names: list[str], pred: np.ndarray, alone: np.ndarray, q
     if out["pred"].isna().any():
         raise WorkspaceError(f"floor {floor}: evaluate/tracks.parquet does not match the test scans; re-run "
                              "`rmbuild evaluate --force`")
-    lv = np.array([levels.get(f) for f in out["floor"]], dtype=object)
-    lp = np.array([levels.get(f) for f in out["pred"]], dtype=object)
-    known = np.array([a is not None and b is not None for a, b in zip(lv, lp, strict=True)])
-    off = np.where(known, [abs(a - b) if k else 0 for a, b, k in zip(lv, lp, known, strict=True)],
-                   (out["floor"] != out["pred"]).astype(int))
-    out["floors_off"] = off.astype(int)
+    out["floors_off"] = [_floors_off(t, p, levels) for t, p in zip(out["floor"], out["pred"], strict=True)]
     return out
+
+
+def _floors_off(true: str, pred: str, levels: dict[str, int | None]) -> int:
+    """Floors between the true and the classified floor: by level when both have one, else 0 or 1."""
+    a, b = levels.get(true), levels.get(pred)
+    return abs(a - b) if a is not None and b is not None else int(true != pred)
 
 
 def _classification(rows: pd.DataFrame) -> dict:
