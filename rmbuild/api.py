@@ -113,9 +113,12 @@ class MapWorkspace:
         return scans(ds, radio_map, [str(w) for w in walk_ids])
 
 
-def open_workspace(root: str | Path) -> MapWorkspace:
-    """Open an existing workspace for reading; WorkspaceError when ``root`` is not one."""
-    ws = MapWorkspace(root)
+def open_workspace(root: str | Path, floor: str | None = None) -> MapWorkspace:
+    """Open an existing workspace for reading (a building's: its floor ``floor``); WorkspaceError when
+    ``root`` is not one."""
+    from rmbuild.stages.localize import one_floor
+
+    ws = MapWorkspace(one_floor(root, floor))
     with ws._reading():
         pass
     return ws

@@ -60,7 +60,9 @@ def test_phone_logfile_reads():
     # POSI -> local ENU at the first fix: 5 m east, then 5 m north (fixture uses a spherical approximation)
     np.testing.assert_allclose(raw.fixes[["x_m", "y_m"]].to_numpy(), [[0, 0], [5, 0], [5, 5]], atol=0.05)
     assert list(raw.fixes["floor"]) == ["0"] * 3 and list(raw.fixes["label"]) == ["posi1", "posi2", "posi3"]
-    assert raw.skipped == {"MAGN": 300, "PRES": 24}
+    assert raw.skipped == {"MAGN": 300}
+    t, hpa = raw.pressure["tiny_logfile"]  # PRES: the barometer, for floor changes (rmbuild/pdr/baro.py)
+    assert len(t) == len(hpa) == 24 and 800 < hpa.min() <= hpa.max() < 1100
 
 
 def test_foot_imu_logfile_uses_imui():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, list_option, stage_viewer, start, workspace_option
+from rmbuild.cli.options import common_options, floor_option, list_option, stage_viewer, start, workspace_option
 from rmbuild.cli.view import rerun_option
 from rmbuild.localize.registry import describe, localizer_names
 
@@ -15,14 +15,15 @@ from rmbuild.localize.registry import describe, localizer_names
              help="Walks held out for testing (default: walks with role 'test', else every 5th walk).")
 @list_option("--localizer", "localizers", choices=localizer_names(),
              help=f"Localizer(s) to run side by side (default from config: knn, wknn). {describe()}.")
+@floor_option
 @rerun_option
 @common_options
-def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet, verbose):
+def evaluate(workspace, test_walks, localizers, floor, rerun, config_path, force, quiet, verbose):
     """Localize held-out walks with maps built from optimised, true and raw positions; report errors."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
-    from rmbuild.io.workspace import Workspace
+    from rmbuild.io.workspace import Workspace, building_report_path
     from rmbuild.stages import evaluate as stage
 
     cfg = load_stage_config("evaluate", config_path,
@@ -33,8 +34,13 @@ def evaluate(workspace, test_walks, localizers, rerun, config_path, force, quiet
     with (stage_viewer(rerun, workspace, "evaluate", quiet, force) as viewer,
           progress_display(quiet, verbose) as progress):
         report, table = stage.run(workspace, cfg, map_cfg, test_walks=walks, progress=progress, viewer=viewer,
-                                  force=force)
-    if not quiet:
-        click.echo(table)
-        ws = Workspace(workspace)
-        click.echo(f"report: {ws.report_path('evaluate')}, CDF plot: {ws.path('evaluate.cdf_png')}")
+                                  force=force, floor=floor)
+    if quiet:
+        return
+    click.echo(table)
+    if "floors" in report:
+        click.echo(f"report: {building_report_path(workspace, 'evaluate')} (each floor's: "
+                   "floors/<NAME>/evaluate/report.json)")
+        return
+    ws = Workspace(workspace)
+    click.echo(f"report: {ws.report_path('evaluate')}, CDF plot: {ws.path('evaluate.cdf_png')}")

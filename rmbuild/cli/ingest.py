@@ -34,17 +34,34 @@ def ingest(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, 
           progress_display(quiet, verbose) as progress):
         s = stage.run(list(inputs), workspace, cfg, fmt=fmt, force=force, progress=progress, pdr_cfg=pdr_cfg,
                       viewer=viewer, floorplan=floorplan)
-    if not quiet:
-        skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
-        click.echo(
-            f"ingested {s['walks']} walks, {s['poses']} poses, {s['readings']} readings "
-            f"in {s['scans']} scans "
-            f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes) -> {workspace}"
-            + (f"; skipped {skipped}" if skipped else "")
-        )
-        if s.get("floorplan"):
-            fp = s["floorplan"]
+    if quiet:
+        return
+    if "floors" in s:  # a building: one line per floor
+        for name, f in s["floors"].items():
+            click.echo(f"floor {name}: {_line(f)}")
+        b = s["building"]
+        click.echo(f"building of {b['floors']} floors: {b['walks']} walks, {b['poses']} poses, {b['aps']} APs "
+                   f"-> {workspace}")
+        if s["skipped"]:
+            click.echo(_skipped(s))
+        notes = dict.fromkeys([*s["notes"], *(n for f in s["floors"].values() for n in f["notes"])])
+    else:
+        click.echo(f"{_line(s)} -> {workspace}")
+        notes = dict.fromkeys(s["notes"])
+    for f in [s] if "floors" not in s else s["floors"].values():
+        if f.get("floorplan"):
+            fp = f["floorplan"]
             inside = "" if fp["fixes_inside"] is None else f" ({fp['fixes_inside']:.0%} of the fixes inside)"
             click.echo(f"floor plan {fp['name'] or '(unnamed)'} kept{inside}")
-        for note in s["notes"]:
-            click.echo(f"note: {note}", err=True)
+    for note in notes:
+        click.echo(f"note: {note}", err=True)
+
+
+def _line(s: dict) -> str:
+    return (f"ingested {s['walks']} walks, {s['poses']} poses, {s['readings']} readings in {s['scans']} scans "
+            f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes)" + _skipped(s, "; "))
+
+
+def _skipped(s: dict, sep: str = "") -> str:
+    skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
+    return f"{sep}skipped {skipped}" if skipped else ""

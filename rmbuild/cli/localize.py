@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from rmbuild.cli.ingest import FORMAT_HELP
-from rmbuild.cli.options import start, workspace_option
+from rmbuild.cli.options import floor_option, start, workspace_option
 from rmbuild.io.formats import reader_names
 from rmbuild.localize.registry import describe, localizer_names
 
@@ -21,10 +21,11 @@ from rmbuild.localize.registry import describe, localizer_names
               help=FORMAT_HELP + " Bare scans (a wifi table without poses) are rmbuild's schema.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="TOML file whose [evaluate] table configures the localizers; unknown keys are errors.")
+@floor_option
 @click.option("--force", is_flag=True, help="Replace an existing output file.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress or summary: only warnings and errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
-def localize(inputs, workspace, out, localizer, fmt, config_path, force, quiet, verbose):
+def localize(inputs, workspace, out, localizer, fmt, config_path, floor, force, quiet, verbose):
     """Localize new walks or bare scans in INPUTS against the workspace's radio map (read-only)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -32,9 +33,9 @@ def localize(inputs, workspace, out, localizer, fmt, config_path, force, quiet, 
     from rmbuild.stages import localize as stage
 
     cfg = load_stage_config("evaluate", config_path)
-    with progress_display(quiet) as progress:
+    with progress_display(quiet, verbose) as progress:
         r = stage.run(workspace, list(inputs), out, cfg, localizer=localizer, fmt=fmt, force=force,
-                      progress=progress)
+                      progress=progress, floor=floor)
     if quiet:
         return
     kind = " (bare scans: no steps)" if r["input_kind"] == "scans" else ""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
+from rmbuild.cli.options import common_options, floor_option, stage_viewer, start, workspace_option
 from rmbuild.cli.view import rerun_option
 
 
@@ -14,16 +14,15 @@ from rmbuild.cli.view import rerun_option
               help="CSV/Parquet with walk_id, t_s, x_m, y_m: known building-frame positions (position priors).")
 @click.option("--preset", type=click.Choice(["rmbuild", "paper"]), default=None,
               help="Start from rmbuild's defaults or from Gu et al.'s model as published (before --config).")
+@floor_option
 @rerun_option
 @common_options
-def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, verbose):
+def optimize(workspace, anchors_path, preset, floor, rerun, config_path, force, quiet, verbose):
     """Align all walks of WORKSPACE into one frame (GTSAM: odometry + fuzzy RSS-vicinity factors)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
     from rmbuild.stages import optimize as stage
-    from rmbuild.stages.optimize import frame_text, metrics_text
-
     base = None
     if preset == "paper":
         from rmbuild.config.optimize import paper_config
@@ -32,9 +31,19 @@ def optimize(workspace, anchors_path, preset, rerun, config_path, force, quiet, 
     cfg = load_stage_config("optimize", config_path, base=base)
     with (stage_viewer(rerun, workspace, "optimize", quiet, force) as viewer,
           progress_display(quiet, verbose) as progress):
-        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force)
+        r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force,
+                      floor=floor)
     if quiet:
         return
+    for name in r.get("ran_floors", [None]):
+        if name is not None:
+            click.echo(f"floor {name}:")
+        _summary(r["floors"][name] if name is not None else r)
+
+
+def _summary(r: dict) -> None:
+    from rmbuild.stages.optimize import frame_text, metrics_text
+
     f = r["factors"]
     click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
                f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "

@@ -45,6 +45,11 @@ def list_option(*decls: str, choices: list[str] | None = None, metavar: str = "N
                         help=f"{help} Repeatable or comma-separated.")
 
 
+floor_option = click.option(
+    "--floor", "floor", default=None, metavar="NAME",
+    help="A building workspace (several floors): run on this floor only (default: every floor).",
+)
+
 workspace_option = click.option(
     "-w", "--workspace", required=True, type=click.Path(file_okay=False),
     help="Workspace directory (created by `rmbuild ingest`).",

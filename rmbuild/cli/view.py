@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from rmbuild.cli.options import start, workspace_option
+from rmbuild.cli.options import floor_option, start, workspace_option
 
 #: `--rerun` for stage commands: absent -> no viewer; `--rerun` alone -> "auto" (spawn when a display is
 #: available, else save WORKSPACE/<stage>.rrd); `--rerun spawn|serve|FILE.rrd`.
@@ -41,16 +41,19 @@ def rerun_target(value: str | None, workspace: str | Path, stage: str):
 @click.option("--serve", is_flag=True, help="Serve the web viewer on localhost (see --port).")
 @click.option("--port", type=int, default=9090, show_default=True,
               help="Web viewer port for --serve (its gRPC server uses PORT+1).")
+@floor_option
 @click.option("--force", is_flag=True, help="Replace an existing recording file.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary: only warnings and errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
-def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
+def view(workspace, save_path, spawn, serve, port, floor, force, quiet, verbose):
     """Log what WORKSPACE holds (walks, optimisation, radio map, evaluation) to the rerun viewer."""
     start(verbose, quiet)
     if sum(map(bool, (save_path, spawn, serve))) > 1:
         raise click.UsageError("give at most one of --save, --spawn, --serve")
     from rmbuild.io.workspace import Workspace, check_output_file
     from rmbuild.stages import view as stage
+    from rmbuild.stages.building import floor_workspaces
+    from rmbuild.stages.view import floor_target
     from rmbuild.viz import ViewTarget, default_target
 
     if save_path:
@@ -59,13 +62,15 @@ def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
         target = ViewTarget("spawn" if spawn else "serve", port=port)
     else:
         target = default_target(Workspace(workspace).path("view.rrd"), port=port)
+    floors = floor_workspaces(workspace, floor)
     if target.path is not None:
-        check_output_file(target.path, force, "recording")
+        for name in floors or [None]:
+            check_output_file(floor_target(target, name).path if name else target.path, force, "recording")
     if target.mode == "serve":  # the viewer must outlive the logging: keep it open until Ctrl-C
         from rmbuild.viz import open_viewer
 
         viewer = open_viewer(target, recording_name=f"rmbuild {Path(workspace).name}")
-        r = stage.run(workspace, viewer=viewer)
+        r = stage.run(workspace, viewer=viewer, floor=floor)
         click.echo(f"logged {', '.join(r['logged'])}; serving the web viewer on http://localhost:{port} "
                    f"(Ctrl-C to stop)", err=True)
         try:
@@ -75,9 +80,16 @@ def view(workspace, save_path, spawn, serve, port, force, quiet, verbose):
     from rmbuild.cli.progress import progress_display
 
     with progress_display(quiet, verbose) as progress:
-        r = stage.run(workspace, target, progress=progress)
+        r = stage.run(workspace, target, progress=progress, floor=floor)
     if quiet:
         return
+    for name in r.get("ran_floors", [None]):
+        if name is not None:
+            click.echo(f"floor {name}: ", nl=False)
+        _summary(r["floors"][name] if name is not None else r)
+
+
+def _summary(r: dict) -> None:
     where = r["path"] if r["path"] else f"the {r['mode']} viewer"
     click.echo(f"logged {', '.join(r['logged'])} to {where} in {r['time_total_s']:.1f} s")
     for k, why in r["skipped"].items():

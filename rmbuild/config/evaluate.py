@@ -58,6 +58,9 @@ class EvaluateConfig:
     # "scan": every Wi-Fi scan (readings sharing walk and time) is one query; "node": every node's mean
     # fingerprint is one query.
     query: Literal["scan", "node"] = "scan"
+    # m; a building's combined error adds this per floor the floor classification is off by (the IPIN
+    # competition's and the Kaggle Indoor Location & Navigation metric's 15 m).
+    floor_penalty_m: float = bounded(15.0, 0.0, 1000.0)
     knn: KnnConfig = field(default_factory=KnnConfig)
     # the other localizers (docs/localizers.md): SLAC (He et al. 2015), naive Bayes (Becker et al. 2015), SSD,
     # PFL, and the Kalman post-filter of the *_kf variants (subway-station paper)

@@ -300,6 +300,19 @@ class PhoneImuConfig:
 
 
 @dataclass(frozen=True)
+class BuildingConfig:
+    # 1; floors stacked in the building, each a venue of its own (same outline; its own layout, APs and
+    # walks); more than 1 writes a `floor` column, and `rmbuild ingest` makes a building workspace.
+    floors: int = bounded(1, 1, 20)
+    # dB; extra path loss per floor between an AP and a scan on another floor (the floor attenuation
+    # factor: about 13-16 dB through one floor in Seidel & Rappaport 1992).
+    floor_attenuation_db: float = bounded(15.0, 0.0, 60.0)
+
+    def validate(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
 class SimulateConfig:
     # seed of the numpy Generator behind every random draw (same config + seed -> identical tables).
     seed: int = bounded(7, 0, 2**63 - 1)
@@ -317,10 +330,13 @@ class SimulateConfig:
     devices: DevicesConfig = field(default_factory=DevicesConfig)
     # raw phone IMU (only with `simulate --raw-imu`)
     phone: PhoneImuConfig = field(default_factory=PhoneImuConfig)
+    # several floors (docs/floors.md)
+    building: BuildingConfig = field(default_factory=BuildingConfig)
 
     def validate(self) -> None:
         check_ranges(self)
-        for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices, self.phone):
+        for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices, self.phone,
+                    self.building):
             sub.validate()
 
 

@@ -16,6 +16,15 @@ Layout (one directory per project; every table is Parquet)::
       report.html, report/     `rmbuild report` (HTML page and its PNGs)
       view.rrd, <stage>.rrd    rerun recordings (`rmbuild view`, `--rerun`)
 
+A building (several floors) is a workspace whose manifest lists its floors; each floor is a whole
+single-floor workspace of the layout above, and the building keeps only the totals over its floors::
+
+    WORKSPACE/
+      manifest.json            the marker, plus "floors": [{"name": "F1", "dir": "floors/F1", "level": 0}, ...]
+      floors/<NAME>/           one workspace per floor (its own manifest.json, data/, optimize/, map/, ...)
+      building/<command>.json  a stage's report over the building: each floor's report under "floors", totals
+      report.html              `rmbuild report`: the building page linking each floor's report
+
 Commit: each stage writes its directory in a temporary directory, report and record included, and one
 rename makes it the stage directory (:func:`rmbuild.io.atomic.replacing_dir`): a kill at any point leaves
 the previous version of the stage or the new one, each with its own matching report and checksums.
@@ -116,6 +125,10 @@ for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.report"] = f"{_dir}/{REPORT}"
     ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
     ARTEFACTS[f"{_stage}.rrd"] = f"{_stage}.rrd"
+
+#: the floors' workspaces, and the building-level reports, relative to a building workspace's root
+FLOORS_DIR = "floors"
+BUILDING_DIR = "building"
 
 #: walk ids become file names (optimize/tum/<name>.txt): at most this many characters before the suffix
 MAX_WALK_FILE_STEM = 64
@@ -264,6 +277,29 @@ class Workspace:
                 marker = {"format": WORKSPACE_FORMAT, "schema_version": SCHEMA_VERSION,
                           "rmbuild_version": __version__, "created_utc": _now()}
                 write_json_atomic(tmp / MANIFEST, marker)
+
+    @staticmethod
+    @contextlib.contextmanager
+    def create_building(root: str | Path, floors: dict[str, int | None],
+                        force: bool = False) -> Iterator[dict[str, StageWriter]]:
+        """Create (or with ``force`` replace) a building workspace, atomically: one ingest writer per floor
+        (``floors``: name -> level, None when unknown), each floor a whole workspace under ``floors/``."""
+        root = Path(root)
+        dirs = walk_file_names(floors)
+        with workspace_lock(root, "ingest"):
+            recover_dir(root)
+            check_replaceable(root, force)
+            with replacing_dir(root) as tmp:
+                writers = {n: StageWriter("ingest", tmp / FLOORS_DIR / dirs[n] / STAGE_DIRS["ingest"])
+                           for n in floors}
+                yield writers
+                marker = {"format": WORKSPACE_FORMAT, "schema_version": SCHEMA_VERSION,
+                          "rmbuild_version": __version__, "created_utc": _now()}
+                for name, writer in writers.items():
+                    _seal(writer, {})
+                    write_json_atomic(tmp / FLOORS_DIR / dirs[name] / MANIFEST, {**marker, "floor": name})
+                write_json_atomic(tmp / MANIFEST, {**marker, "floors": [
+                    {"name": n, "dir": f"{FLOORS_DIR}/{dirs[n]}", "level": lv} for n, lv in floors.items()]})
 
     @classmethod
     def open(cls, root: str | Path) -> Workspace:
@@ -455,6 +491,34 @@ class Workspace:
     def read_fingerprints(self) -> Fingerprints:
         self.require("ingest")
         return Fingerprints.from_long(self.read_table("data.fingerprints"))
+
+
+def building_floors(root: str | Path) -> dict[str, Path] | None:
+    """floor name -> the floor's workspace directory, for a building workspace; None for a single floor
+    (or no workspace at all: opening it reports that)."""
+    root = Path(root)
+    m = _read_marker(root)
+    if not _is_marker(m) or not isinstance((m or {}).get("floors"), list):
+        return None
+    out: dict[str, Path] = {}
+    for f in (m or {})["floors"]:
+        if not (isinstance(f, dict) and isinstance(f.get("name"), str) and isinstance(f.get("dir"), str)
+                and f["dir"].startswith(FLOORS_DIR + "/") and "/" not in f["dir"][len(FLOORS_DIR) + 1:]
+                and f["dir"][len(FLOORS_DIR) + 1:] not in ("", ".", "..")):
+            raise WorkspaceError(f"{root / MANIFEST}: malformed floor entry {str(f)[:120]}")
+        out[f["name"]] = root / f["dir"]
+    return out
+
+
+def floor_levels(root: str | Path) -> dict[str, int | None]:
+    """floor name -> level (0 ground floor, -1 the first basement; None unknown) of a building workspace."""
+    m = _read_marker(Path(root)) or {}
+    return {f["name"]: f.get("level") if isinstance(f.get("level"), int) else None for f in m.get("floors", [])}
+
+
+def building_report_path(root: str | Path, command: str) -> Path:
+    """Where a stage's building-level report goes (``building/<command>.json``)."""
+    return Path(root) / BUILDING_DIR / f"{command}.json"
 
 
 def _recover(root: Path) -> None:

@@ -10,7 +10,9 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config import EvaluateConfig, MapConfig, load_stage_config_text, to_toml
+from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace
+from rmbuild.stages.building import floor_workspaces, no_viewer_for_building
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions
 from rmbuild.stages.view import log_workspace
@@ -28,9 +30,20 @@ def run(
     progress: Progress | None = None,
     force: bool = False,
     viewer: Viewer | None = None,
+    floor: str | None = None,
 ) -> tuple[dict, str]:
     """Evaluate; returns (the evaluate report, a short text table). ``map_cfg`` None: the config export-map
-    ran with (the defaults when it has not run)."""
+    ran with (the defaults when it has not run). A building: every floor (or the one ``floor`` names), then
+    the floor classification of the test scans (:mod:`rmbuild.stages.floor_eval`)."""
+    floors = floor_workspaces(workspace, floor)
+    if floors is not None:
+        from rmbuild.stages.floor_eval import run_building
+
+        no_viewer_for_building(viewer, floors)
+        if test_walks and len(floors) > 1:
+            raise InputError("--test-walks name one floor's walks: pick the floor with --floor NAME")
+        return run_building(workspace, floors, cfg, lambda p: run(p, cfg, map_cfg, test_walks, progress, force,
+                                                                  viewer))
     with locked_workspace(workspace, "evaluate") as ws:
         if map_cfg is None:
             map_cfg = map_config_of(ws)
@@ -77,8 +90,6 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
         known = set(ds.walks["walk_id"].astype(str))
         unknown = [w for w in test_walks if w not in known]
         if unknown:
-            from rmbuild.errors import InputError
-
             raise InputError(f"--test-walks: unknown walk {unknown[0]!r}")
     from rmbuild.localize.base import localizer_class
 

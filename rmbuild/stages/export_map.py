@@ -8,8 +8,10 @@ from pathlib import Path
 import pandas as pd
 
 from rmbuild.config import MapConfig, to_toml
+from rmbuild.errors import InputError
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
+from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
 from rmbuild.stages.view import log_workspace
@@ -26,8 +28,17 @@ def run(
     progress: Progress | None = None,
     force: bool = False,
     viewer: Viewer | None = None,
+    floor: str | None = None,
 ) -> dict:
-    """Build the radio map from the optimised poses; returns the export-map report."""
+    """Build the radio map from the optimised poses; returns the export-map report (a building's: every
+    floor's, or the one ``floor`` names, :mod:`rmbuild.stages.building`)."""
+    floors = floor_workspaces(workspace, floor)
+    if floors is not None:
+        no_viewer_for_building(viewer, floors)
+        if anchors_path is not None and len(floors) > 1:
+            raise InputError("--anchors name one floor's walks: pick the floor with --floor NAME")
+        return run_floors(workspace, "export-map", floors,
+                          lambda _, p: run(p, cfg, anchors_path, progress, force, viewer), stage="map")
     with locked_workspace(workspace, "export-map") as ws:
         return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer))
 

@@ -12,12 +12,17 @@ from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
+from rmbuild.ingest_floors import barometer_warnings, floor_level, split_floors
+from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floorplan import MIN_FIXES_INSIDE, fixes_inside_share, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
+from rmbuild.io.formats.base import RawInput
 from rmbuild.io.lock import workspace_lock
-from rmbuild.io.workspace import Workspace, check_replaceable, write_dataset
+from rmbuild.io.workspace import StageWriter, Workspace, building_report_path, check_replaceable, write_dataset
+from rmbuild.stages.building import building_report
 from rmbuild.stages.common import Progress, ensure_progress
 from rmbuild.stages.view import log_workspace
+from rmbuild.types import Dataset, Fingerprints
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
@@ -79,26 +84,24 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     raw = reader.read(files, cfg)
     progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
+    baro = barometer_warnings(raw)
+    floors = split_floors(raw)
+    if floors is not None:
+        return _run_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, plan, raw,
+                             floors, t0, t_read)
     if raw.imu:  # the count is the PDR's; validating and attaching follow it in the same phase
         progress.phase("phone PDR, validating, attaching readings", len(raw.imu), "walks")
     else:
         progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
-    ds, fp, summary = build_dataset(raw, cfg, source=reader.name, pdr_cfg=pdr_cfg,
-                                    on_walk=lambda w: progress.advance())
+    ds, fp, summary, plan = _build(raw, cfg, reader.name, pdr_cfg, plan, on_walk=lambda w: progress.advance())
     progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
-    summary["warnings"].extend(evidence_warnings(ds))
-    plan = plan if plan is not None else raw.floorplan
-    summary["floorplan"] = _plan_summary(plan, ds, summary["warnings"])
+    summary["warnings"].extend(baro)
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
     progress.phase("writing workspace")
     with Workspace.create(workspace, force=force) as w:
-        write_dataset(w, ds, fp)
-        if plan is not None:
-            w.json("data.floorplan", plan)
-        uses_pdr = reader.name != "rmbuild" or bool(raw.imu)
-        w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if uses_pdr else ""))
+        _write(w, ds, fp, plan, cfg, pdr_cfg, reader.name != "rmbuild" or bool(raw.imu))
         summary["time_s"] = {"read": round(t_read, 3), "validate_attach": round(t_build, 3),
                              "total": round(time.perf_counter() - t0, 3)}
         w.report = summary
@@ -106,6 +109,63 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
         log.warning(msg)
     log_workspace(Workspace.open(workspace), viewer)
     return summary
+
+
+def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan: dict | None,
+           on_walk=None) -> tuple[Dataset, Fingerprints, dict, dict | None]:
+    """Validate and attach one floor's input: (dataset, fingerprints, summary, the floor plan kept);
+    ``on_walk(walk_id)`` after each walk's PDR."""
+    ds, fp, summary = build_dataset(raw, cfg, source=fmt, pdr_cfg=pdr_cfg, on_walk=on_walk)
+    summary["warnings"].extend(evidence_warnings(ds))
+    plan = plan if plan is not None else raw.floorplan
+    summary["floorplan"] = _plan_summary(plan, ds, summary["warnings"])
+    return ds, fp, summary, plan
+
+
+def _write(w: StageWriter, ds: Dataset, fp: Fingerprints, plan: dict | None, cfg: IngestConfig,
+           pdr_cfg: PdrConfig, uses_pdr: bool) -> None:
+    write_dataset(w, ds, fp)
+    if plan is not None:
+        w.json("data.floorplan", plan)
+    w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if uses_pdr else ""))
+
+
+def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestConfig, fmt: str, force: bool,
+                  progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None, whole: RawInput,
+                  floors: dict[str, RawInput], t0: float, t_read: float) -> dict:
+    """Ingest an input of several floors into a building workspace: one floor workspace each."""
+    if plan is not None:
+        raise InputError(f"--floorplan gives one plan, but the input holds {len(floors)} floors "
+                         f"({', '.join(floors)}); ingest them one floor at a time to give plans")
+    built = {}
+    for name, raw in floors.items():
+        if raw.imu:
+            progress.phase(f"floor {name}: phone PDR, validating, attaching readings", len(raw.imu), "walks")
+        else:
+            progress.phase(f"floor {name}: validating and attaching readings")
+        t1 = time.perf_counter()
+        ds, fp, summary, fplan = _build(raw, cfg, fmt, pdr_cfg, None, on_walk=lambda w: progress.advance())
+        summary = {"stage": "ingest", "format": fmt, "inputs": [str(p) for p in inputs], "floor": name, **summary}
+        summary["time_s"] = {"validate_attach": round(time.perf_counter() - t1, 3)}
+        built[name] = (ds, fp, summary, fplan, fmt != "rmbuild" or bool(raw.imu))
+    progress.phase("writing workspace")
+    with Workspace.create_building(workspace, {n: floor_level(n) for n in floors}, force=force) as writers:
+        for name, (ds, fp, summary, fplan, uses_pdr) in built.items():
+            _write(writers[name], ds, fp, fplan, cfg, pdr_cfg, uses_pdr)
+            writers[name].report = summary
+    report = building_report(workspace, "ingest", "ingest")
+    bssids = set().union(*(set(ds.wifi["bssid"].astype(str)) for ds, *_ in built.values()))
+    report["building"].update({"aps": len(bssids), "time_s": {"read": round(t_read, 3),
+                                                               "total": round(time.perf_counter() - t0, 3)}})
+    report.update({"format": fmt, "inputs": [str(p) for p in inputs], "skipped": dict(whole.skipped),
+                   "notes": list(whole.notes)})
+    write_json_atomic(building_report_path(workspace, "ingest"), report)
+    for name, (*_, summary, _p, _u) in built.items():
+        for msg in summary["warnings"]:
+            log.warning(f"floor {name}: {msg}")
+    if viewer.enabled:
+        log.warning("--rerun: a building's floors are viewed one at a time (`rmbuild view --floor NAME`)")
+    return report
 
 
 def _plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:

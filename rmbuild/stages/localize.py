@@ -56,13 +56,16 @@ def run(
     fmt: str | None = None,
     force: bool = False,
     progress: Progress | None = None,
+    floor: str | None = None,
 ) -> dict:
-    """Localize ``inputs`` against ``workspace``'s map, write per-scan positions to ``out`` (CSV or Parquet
-    by suffix); returns the report (errors under "errors" when the input has ground truth)."""
+    """Localize ``inputs`` against ``workspace``'s map (a building's: the map of ``floor``), write per-scan
+    positions to ``out`` (CSV or Parquet by suffix); returns the report (errors under "errors" when the
+    input has ground truth)."""
     from rmbuild.evaluate.localization import error_stats, query_reference_xy
     from rmbuild.localize.apply import localize_query, positions_table
     from rmbuild.localize.base import Query, localizer_class
 
+    workspace = one_floor(workspace, floor)
     out = check_output(out, force)
     name = localizer or cfg.localizers[0]
     localizer_class(name)  # an unknown name fails before anything is read
@@ -191,3 +194,17 @@ def write_table(df: pd.DataFrame, out: Path) -> None:
     else:
         buf.write(df.to_csv(index=False, float_format="%.4f").encode("utf-8"))
     write_bytes_atomic(out, buf.getvalue())
+
+
+def one_floor(workspace: str | Path, floor: str | None) -> Path:
+    """The workspace whose map to use: ``workspace`` itself, or the floor ``floor`` of a building."""
+    from rmbuild.errors import InputError
+    from rmbuild.stages.building import floor_workspaces
+
+    floors = floor_workspaces(workspace, floor)
+    if floors is None:
+        return Path(workspace)
+    if len(floors) != 1:
+        raise InputError(f"a building workspace (floors {', '.join(floors)}): localize against one floor's map "
+                         "with --floor NAME", str(workspace))
+    return next(iter(floors.values()))

@@ -18,6 +18,7 @@ from rmbuild.evaluate.trajectory import trajectory_metrics
 from rmbuild.floorplan import FloorPlan, from_local_geojson
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
+from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.view import log_workspace
 from rmbuild.viz.viewer import Viewer, ensure_viewer
@@ -44,8 +45,17 @@ def run(
     progress: Progress | None = None,
     force: bool = False,
     viewer: Viewer | None = None,
+    floor: str | None = None,
 ) -> dict:
-    """Run the SLAM back end on the workspace's walks; returns the optimize report."""
+    """Run the SLAM back end on the workspace's walks; returns the optimize report (a building's: every
+    floor's, or the one ``floor`` names, :mod:`rmbuild.stages.building`)."""
+    floors = floor_workspaces(workspace, floor)
+    if floors is not None:
+        no_viewer_for_building(viewer, floors)
+        if anchors_path is not None and len(floors) > 1:
+            raise InputError("--anchors name one floor's walks: pick the floor with --floor NAME")
+        return run_floors(workspace, "optimize", floors,
+                          lambda _, p: run(p, cfg, anchors_path, progress, force, viewer))
     with locked_workspace(workspace, "optimize") as ws:
         return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer))
 

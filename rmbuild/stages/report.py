@@ -9,17 +9,29 @@ from pathlib import Path
 from rmbuild.errors import InputError
 from rmbuild.io.atomic import write_bytes_atomic, write_text_atomic
 from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.stages.building import building_page, floor_workspaces, run_floors
 from rmbuild.stages.common import locked_workspace
 
 log = logging.getLogger(__name__)
 
 
 def run(workspace: str | Path, out: str | Path | None = None, png_dir: str | Path | None = None,
-        heatmap_top_n: int = 6, force: bool = False) -> dict:
+        heatmap_top_n: int = 6, force: bool = False, floor: str | None = None) -> dict:
     """Write the report to ``out`` (default WORKSPACE/report.html) atomically and each figure as a PNG in
     ``png_dir`` (default WORKSPACE/report/); returns {"path", "png_dir", "figures", "missing", "time_s"}.
 
-    An existing report (the HTML file, or PNGs in ``png_dir``) is replaced only with ``force``."""
+    An existing report (the HTML file, or PNGs in ``png_dir``) is replaced only with ``force``. A building:
+    each floor's report in its own workspace (or the one ``floor`` names), and at ``out`` (default
+    WORKSPACE/report.html) a page linking them with the building's totals."""
+    floors = floor_workspaces(workspace, floor)
+    if floors is not None:
+        if png_dir is not None:
+            raise InputError("--png-dir: a building's floors keep their figures in their own workspaces")
+        index = check_output_file(out if out is not None else Workspace(workspace).path("report.html"), force, "report")
+        r = run_floors(workspace, "report", floors, lambda _, p: run(p, None, None, heatmap_top_n, force),
+                       exclusive=False, summaries=True)
+        write_text_atomic(index, building_page(workspace, r["floors"], index))
+        return {**r, "path": str(index)}
     with locked_workspace(workspace, "report", exclusive=False) as ws:
         out_p = check_output_file(out if out is not None else ws.path("report.html"), force, "report")
         png_p = Path(png_dir) if png_dir is not None else ws.path("report.png_dir")

@@ -66,7 +66,12 @@ def run(
             raise InputError(f"{out} already exists; pass --force to replace it")
     t0 = time.perf_counter()
     progress.phase("simulating venue")
-    data = simulate(cfg)
+    if cfg.building.floors > 1:
+        from rmbuild.synthetic.building import simulate_building
+
+        data = simulate_building(cfg)
+    else:
+        data = simulate(cfg)
     t_sim = time.perf_counter() - t0
     progress.message(f"{len(data.walks)} walks, {len(data.poses):,} steps, {len(data.wifi):,} Wi-Fi readings")
     imu = None

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from rmbuild.io.workspace import Workspace
+from rmbuild.io.workspace import Workspace, walk_file_names
+from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.viz import Viewer, ViewTarget, open_viewer
 from rmbuild.viz.align import frame_to_fixes, frame_to_truth, plan_segments
@@ -100,11 +102,28 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
     return {"logged": logged, "skipped": skipped, "time_s": {k: round(v, 4) for k, v in times.items()}}
 
 
+def floor_target(target: ViewTarget | None, floor: str) -> ViewTarget | None:
+    if target is None or target.path is None:
+        return target
+    name = walk_file_names([floor])[floor]
+    return replace(target, path=target.path.with_name(f"{target.path.stem}-{name}{target.path.suffix}"))
+
+
 def run(workspace: str | Path, target: ViewTarget | None = None, viewer: Viewer | None = None,
-        progress: Progress | None = None) -> dict:
+        progress: Progress | None = None, floor: str | None = None) -> dict:
     """Log ``workspace`` to ``viewer`` (left open: the caller closes it, e.g. a served viewer that must stay
     up) or else to a new viewer for ``target`` (closed at the end: the .rrd is complete on return).
-    Returns a summary: what was logged and skipped, where, counts, timings."""
+    Returns a summary: what was logged and skipped, where, counts, timings.
+
+    A building: one recording per floor (or the one ``floor`` names); a saved one goes to ``PATH-<floor>.rrd``
+    beside ``target``'s path, a spawned one is a recording of its own in the viewer."""
+    floors = floor_workspaces(workspace, floor)
+    if floors is not None:
+        no_viewer_for_building(viewer, floors)
+        if viewer is not None:
+            return run(next(iter(floors.values())), target, viewer, progress)
+        return run_floors(workspace, "view", floors, lambda n, p: run(p, floor_target(target, n), None, progress),
+                          stage="view", exclusive=False, summaries=True)
     t0 = time.perf_counter()
     with locked_workspace(workspace, "view", exclusive=False) as ws:
         ws.require("ingest")

@@ -15,6 +15,8 @@ Contract for ``Reader.read``:
 - ``wifi``: walk_id, t_s, bssid (str), rssi_dbm (float); optional freq_mhz, ssid.
 - ``fixes``: walk_id, t_s, x_m, y_m, label — ground truth / landmark fixes (may be empty).
 - ``walks``: walk_id, device_id, user_id, role, source.
+- ``floor`` (optional str column on ``walks`` or ``poses``): the floor the data is on; an input with
+  several floors is split into one workspace per floor (:mod:`rmbuild.ingest_floors`).
 - A problem in a file raises :class:`rmbuild.errors.InputError` naming file and line/row. Lines of a
   known-but-unused kind are counted in ``skipped`` (kind -> count), not errors.
 - ``where`` maps each table to a callable giving "file:row" for a row position, so shared validation can
@@ -82,6 +84,10 @@ class RawInput:
     merge_duplicate_readings: bool = False
     #: the floor plan that came with the data (GeoJSON in local metres, :func:`rmbuild.floorplan.to_geojson`)
     floorplan: dict | None = None
+    #: floor name -> its plan, for an input of several floors (``floor`` columns, rmbuild/ingest_floors.py)
+    floorplans: dict[str, dict] = field(default_factory=dict)
+    #: walk_id -> (times s, pressure hPa) of its barometer, when the format has one (floor changes)
+    pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 class Reader(ABC):

@@ -36,10 +36,10 @@ from rmbuild.pdr import (
 
 FORMAT_NAME = "ipin"
 #: tag -> number of ';'-separated fields including the tag (WIFI: at least; the SSID may contain ';')
-_FIELDS = {"ACCE": 7, "GYRO": 7, "MAGN": 7, "AHRS": 10, "WIFI": 7, "POSI": 7, "IMUI": 18}
+_FIELDS = {"ACCE": 7, "GYRO": 7, "MAGN": 7, "AHRS": 10, "WIFI": 7, "POSI": 7, "IMUI": 18, "PRES": 5}
 #: tags of the GetSensorData app that rmbuild does not use (skipped with a count, like any other tag)
 KNOWN_UNUSED = (
-    "PRES", "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLE4", "BLUE", "RFID", "IMUX", "IMUL",
+    "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLE4", "BLUE", "RFID", "IMUX", "IMUL",
 )
 _TAG_LINE = re.compile(r"^[A-Z][A-Z0-9]{3};")
 #: characters; a longer line is an error (the IPIN 2023 logfiles' longest line, a header line, has 340)
@@ -310,6 +310,7 @@ class IpinReader(Reader):
         fix_where: list[str] = []
         imu: dict[str, RawImu] = {}
         skipped: Counter = Counter()
+        pressure: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for lg in logs:
             f = lg.path
             if opts.ipin.use_imui and len(lg.num["IMUI"]) > 0:
@@ -344,6 +345,8 @@ class IpinReader(Reader):
             fix_where.extend(f"{f}:{ln}" for ln in lg.line["POSI"])
             walks.append({"walk_id": lg.walk_id, "device_id": lg.device_id, "user_id": "", "role": "",
                           "source": FORMAT_NAME})
+            if len(lg.num["PRES"]):  # PRES;AppTimestamp;SensorTimestamp;pressure (mbar = hPa);accuracy
+                pressure[lg.walk_id] = (lg.num["PRES"][:, 0], lg.num["PRES"][:, 2])
             skipped.update(lg.skipped)
         pose_df = pd.concat(poses, ignore_index=True) if poses else pd.DataFrame(
             {c: pd.Series(dtype=object if c == "walk_id" else np.float64)
@@ -360,6 +363,7 @@ class IpinReader(Reader):
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             merge_duplicate_readings=True,
+            pressure=pressure,
             where={
                 "walks": lambda i: str(seen[walks[i]["walk_id"]]),
                 "poses": lambda i: f"{seen[pw[i]]} (step {ps[i]})",

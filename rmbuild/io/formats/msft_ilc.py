@@ -383,21 +383,33 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
                   n_dup)
 
 
-def _floor_plan(files: list[Path]) -> dict | None:
-    """The floor's plan (``geojson_map.json`` scaled by ``floor_info.json``'s width and height, the frame of
-    the waypoints) as local-metre GeoJSON, when both files are among the inputs."""
+def _floor_plans(files: list[Path]) -> dict[str, dict]:
+    """Each floor folder's plan (``geojson_map.json`` scaled by ``floor_info.json``'s width and height, the
+    frame of the waypoints) as local-metre GeoJSON, by folder name, when both files are among the inputs."""
     from rmbuild.floorplan import from_ilc, to_geojson
 
-    byname = {f.name: f for f in files}
-    if "geojson_map.json" not in byname or "floor_info.json" not in byname:
-        return None
-    try:
-        info = json.loads(byname["floor_info.json"].read_text())["map_info"]
-        doc = json.loads(byname["geojson_map.json"].read_text())
-        name = byname["geojson_map.json"].parent.name
-        return to_geojson(from_ilc(doc, float(info["width"]), float(info["height"]), name))
-    except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
-        raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
+    folders: dict[Path, dict[str, Path]] = {}
+    for f in files:
+        if f.name in ("geojson_map.json", "floor_info.json"):
+            folders.setdefault(f.parent, {})[f.name] = f
+    out: dict[str, dict] = {}
+    for folder, byname in folders.items():
+        if len(byname) < 2:
+            continue
+        try:
+            info = json.loads(byname["floor_info.json"].read_text())["map_info"]
+            doc = json.loads(byname["geojson_map.json"].read_text())
+            out[folder.name] = to_geojson(from_ilc(doc, float(info["width"]), float(info["height"]), folder.name))
+        except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+            raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
+    return out
+
+
+def _trace_floor(tr: _Trace, path: Path) -> str:
+    """The trace header's FloorName, else the floor folder holding ``path_data_files/`` (the ILC layout)."""
+    if tr.floor:
+        return tr.floor
+    return path.parent.parent.name if path.parent.name == "path_data_files" else ""
 
 
 @register
@@ -416,10 +428,11 @@ class MsftIlcReader(Reader):
         opts = self.options
         traces = [f for f in files if f.name not in COMPANION_FILES]
         notes: list[str] = []
-        plan = _floor_plan(files)
-        if plan is not None:
-            notes.append(f"floor plan: {plan['name'] or 'geojson_map.json'} with its extent from floor_info.json")
-        used = {"geojson_map.json", "floor_info.json"} if plan is not None else set()
+        plans = _floor_plans(files)
+        plan = next(iter(plans.values())) if len(plans) == 1 else None
+        for p in plans.values():
+            notes.append(f"floor plan: {p['name'] or 'geojson_map.json'} with its extent from floor_info.json")
+        used = {"geojson_map.json", "floor_info.json"} if plans else set()
         unused = sorted({f.name for f in files if f.name in COMPANION_FILES} - used)
         if unused:
             notes.append(f"companion files not used: {', '.join(unused)}")
@@ -451,7 +464,7 @@ class MsftIlcReader(Reader):
             fixes.append(tr.waypoints)
             fix_lines.append(tr.waypoint_lines)
             walks.append({"walk_id": tr.walk_id, "device_id": tr.device_id, "user_id": "", "role": "",
-                          "source": FORMAT_NAME})
+                          "source": FORMAT_NAME, "floor": _trace_floor(tr, f)})
             skipped.update(tr.skipped)
             n_stale += tr.n_wifi_stale
             n_dup += tr.n_wifi_dup
@@ -464,7 +477,7 @@ class MsftIlcReader(Reader):
             notes.append(f"merged {n_dup:,} Wi-Fi rows repeating a BSSID within one scan (heard on two channels; "
                          "the most recently seen row kept)")
         return RawInput(
-            walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source"]),
+            walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source", "floor"]),
             poses=pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64)
                                 for c in ("walk_id", "t_s", "x_m", "y_m", "heading_rad")}),
             wifi=pd.concat(wifi, ignore_index=True),
@@ -474,6 +487,7 @@ class MsftIlcReader(Reader):
             notes=notes,
             where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines),
             floorplan=plan,
+            floorplans=plans if len(plans) > 1 else {},
         )
 
 

@@ -35,9 +35,9 @@ SUFFIXES = (".csv", ".csv.gz", ".parquet")
 # column -> kind ("str" | "num"); required and optional columns per table
 POSE_ABS = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num", "heading_rad": "num"}
 POSE_INC = {"walk_id": "str", "t_s": "num", "step_length_m": "num", "dheading_rad": "num"}
-POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "num"}
+POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "num", "floor": "str"}
 SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
-    "walks": ({"walk_id": "str"}, {"device_id": "str", "user_id": "str", "role": "str"}),
+    "walks": ({"walk_id": "str"}, {"device_id": "str", "user_id": "str", "role": "str", "floor": "str"}),
     "wifi": (
         {"walk_id": "str", "t_s": "num", "bssid": "str", "rssi_dbm": "num"},
         {"freq_mhz": "num", "ssid": "str"},
