@@ -47,6 +47,8 @@ def read_radio_map(ws: Workspace) -> RadioMap:
         raise WorkspaceError(f"{ws.path('map.sidecar')}: not a radio-map sidecar ({type(e).__name__}: {e})") from None
     long = ws.read_table("map.cells")
     cells = _cells(long)
+    if ws.exists("map.cell_table"):  # the per-cell counts (maps written before it have lower bounds / -1)
+        cells = _counts(cells, ws.read_table("map.cell_table"), ws)
     arrays = _cell_arrays(long, cells, bssids, ws)
     nodes, node_xy, node_walk = _nodes(ws.read_table("map.nodes"), bssids, ws)
     hist = _histograms(ws, side, bssids, cells) if ws.exists("map.histograms") else None
@@ -58,8 +60,9 @@ def read_radio_map(ws: Workspace) -> RadioMap:
 def _cells(long: pd.DataFrame) -> pd.DataFrame:
     """The cell table (:data:`CELL_COLUMNS`): one row per cell id, from the long table.
 
-    The per-cell counts of scans, nodes and walks are not in the long table: ``n_walks`` is the largest
-    per-AP count of walks (a lower bound), ``n_scans`` and ``n_nodes`` are -1 (not stored).
+    The per-cell counts of scans, nodes and walks are not in the long table (they are in the cell table,
+    :func:`_counts`): here ``n_walks`` is the largest per-AP count of walks (a lower bound), ``n_scans`` and
+    ``n_nodes`` are -1.
     """
     g = long.groupby("cell", sort=True)
     first = g[["ix", "iy", "x_m", "y_m", "interpolated"]].first()
@@ -72,6 +75,19 @@ def _cells(long: pd.DataFrame) -> pd.DataFrame:
         "interpolated": first["interpolated"].to_numpy(dtype=bool),
     })
     return cells[list(CELL_COLUMNS)]
+
+
+def _counts(cells: pd.DataFrame, table: pd.DataFrame, ws: Workspace) -> pd.DataFrame:
+    """``cells`` with n_scans, n_nodes and n_walks from the map's cell table."""
+    try:
+        t = table.set_index("cell").loc[cells["cell"].to_numpy()]
+        out = cells.copy()
+        for c in ("n_scans", "n_nodes", "n_walks"):
+            out[c] = t[c].to_numpy(dtype=np.int64)
+    except (KeyError, ValueError, TypeError) as e:
+        raise WorkspaceError(f"{ws.path('map.cell_table')}: cells do not match the radio map "
+                             f"({type(e).__name__}: {str(e)[:100]})") from None
+    return out
 
 
 def _cell_arrays(long: pd.DataFrame, cells: pd.DataFrame, bssids: np.ndarray, ws: Workspace) -> dict:

@@ -105,6 +105,7 @@ ARTEFACTS: dict[str, str] = {
     "optimize.anchors": "optimize/anchors.parquet",
     # map
     "map.cells": "map/radiomap.parquet",
+    "map.cell_table": "map/cells.parquet",
     "map.nodes": "map/reference_nodes.parquet",
     "map.wide_csv": "map/radiomap_uji.csv",
     "map.wide_csv_aps": "map/radiomap_uji_aps.csv",
