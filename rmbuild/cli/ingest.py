@@ -19,14 +19,21 @@ FORMAT_HELP = "Input format (default: recognised from the files): " + "; ".join(
 @click.option("--floorplan", "floorplan", type=click.Path(dir_okay=False), default=None,
               help="GeoJSON floor plan (WGS84 lon/lat, or metres with \"frame\": \"local_m\") in the frame of "
                    "the data's fixes; kept in the workspace for `optimize` (optimize.floorplan.use) and pictures.")
+@click.option("--append", is_flag=True,
+              help="Add the walks of INPUTS to the existing workspace (read with its own [ingest]/[pdr] config; "
+                   "a walk id already there is an error); later stages' outputs become stale.")
 @rerun_option
 @common_options
-def ingest(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, verbose):
+def ingest(inputs, workspace, fmt, floorplan, append, rerun, config_path, force, quiet, verbose):
     """Read INPUTS (files or directories), validate them and create the workspace."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
     from rmbuild.config import load_stage_config
     from rmbuild.stages import ingest as stage
+
+    if append:
+        _append(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, verbose)
+        return
 
     cfg = load_stage_config("ingest", config_path)
     pdr_cfg = load_stage_config("pdr", config_path)
@@ -65,3 +72,20 @@ def _line(s: dict) -> str:
 def _skipped(s: dict, sep: str = "") -> str:
     skipped = ", ".join(f"{v} {k}" for k, v in s["skipped"].items())
     return f"{sep}skipped {skipped}" if skipped else ""
+
+
+def _append(inputs, workspace, fmt, floorplan, rerun, config_path, force, quiet, verbose) -> None:
+    from rmbuild.cli.progress import progress_display
+    from rmbuild.stages import append as stage
+
+    given = [name for name, v in (("--floorplan", floorplan), ("--rerun", rerun), ("--config", config_path),
+                                  ("--force", force)) if v]
+    if given:
+        raise click.UsageError(f"--append reads the new walks with the workspace's own settings: {given[0]} "
+                               "cannot be combined with it")
+    with progress_display(quiet, verbose) as progress:
+        s = stage.run(list(inputs), workspace, fmt=fmt, progress=progress)
+    if not quiet:
+        a = s["appended"][-1]
+        click.echo(f"appended {a['walks']} walks, {a['poses']} poses -> {workspace} (now {s['walks']} walks); "
+                   "re-run optimize, export-map and evaluate with --force")

@@ -380,6 +380,18 @@ class Workspace:
 
     # ------------------------------------------------------------------ writing a stage
     @contextlib.contextmanager
+    def replacing_ingest(self) -> Iterator[StageWriter]:
+        """Hold the workspace's lock and replace its ``data/`` directory in one commit (``ingest --append``);
+        the later stages' outputs stay, stale: their records name the ingest they read."""
+        with workspace_lock(self.root, "ingest"):
+            with replacing_dir(self.root / STAGE_DIRS["ingest"]) as tmp_dir:
+                writer = StageWriter("ingest", tmp_dir)
+                yield writer
+                _seal(writer, {})
+            self._records.clear()
+            self._verified.clear()
+
+    @contextlib.contextmanager
     def writing(self, stage: str) -> Iterator[StageWriter]:
         """Write ``stage``'s directory as a whole, its report and record included, in one commit."""
         if stage == "ingest":

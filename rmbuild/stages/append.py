@@ -1,0 +1,111 @@
+"""`rmbuild ingest --append`: add new walks to an existing workspace's data without touching its walks.
+
+The new input is read with the [ingest] and [pdr] config the workspace was ingested with (so old and new
+walks are treated alike), validated the same way, and its walks follow the old ones: old node ids stay what
+they were, new ones continue after them. A walk id already in the workspace is an error. The data directory
+is replaced in one commit; the outputs of later stages stay on disk but are stale (their records name the
+ingest they read), so the stages after ingest refuse or warn until they are re-run.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from rmbuild.errors import InputError
+from rmbuild.io.workspace import Workspace, building_floors, write_dataset
+from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.types import Dataset, Fingerprints
+
+log = logging.getLogger(__name__)
+
+#: report keys that are counts over the walks (summed over the old and the new part)
+COUNT_KEYS = ("walks", "poses", "readings", "readings_dropped_outside_walk", "scans", "fixes")
+
+
+def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
+        progress: Progress | None = None) -> dict:
+    """Append the walks of ``inputs`` to ``workspace``; returns the new ingest report."""
+    from rmbuild.stages.localize import ingest_configs, read_input
+
+    if building_floors(workspace) is not None:
+        raise InputError("--append adds walks to one floor: ingest --append into the floor's workspace "
+                         "(WORKSPACE/floors/NAME)", str(workspace))
+    progress = ensure_progress(progress)
+    t0 = time.perf_counter()
+    ws = Workspace.open(workspace)
+    icfg, pcfg = ingest_configs(ws)
+    progress.phase("reading the new input")
+    new = read_input(inputs, fmt, icfg, pcfg)
+    if new.kind != "walks":
+        raise InputError("--append needs walks (poses), not bare scans", ", ".join(map(str, inputs)))
+    with ws.replacing_ingest() as w:
+        old = ws.read_dataset()
+        _check_new_ids(old, new.dataset, inputs)
+        progress.phase("merging")
+        ds = merge(old, new.dataset)
+        fp = Fingerprints.from_readings(ds.wifi)
+        write_dataset(w, ds, fp)
+        w.config(ws.read_config_text("ingest") or "")
+        report = _report(ws.read_report("ingest") or {}, ds, fp, new.dataset, inputs, new.reader)
+        report["time_s"] = {"total": round(time.perf_counter() - t0, 3)}
+        w.report = report
+    return report
+
+
+def _check_new_ids(old: Dataset, new: Dataset, inputs: list[str | Path]) -> None:
+    dup = sorted(set(old.walks["walk_id"].astype(str)) & set(new.walks["walk_id"].astype(str)))
+    if dup:
+        raise InputError(f"walk {dup[0]!r} is already in the workspace ({len(dup)} duplicate walk id(s)); "
+                         "--append only adds new walks", ", ".join(map(str, inputs)))
+    if not len(new.walks):
+        raise InputError("no walks with poses in the new input", ", ".join(map(str, inputs)))
+
+
+def merge(old: Dataset, new: Dataset) -> Dataset:
+    """``old`` then ``new``: poses (node ids) of the new walks continue after the old ones."""
+    off = len(old.poses)
+    wifi = new.wifi.copy()
+    wifi["node"] = wifi["node"] + off
+    truth = None
+    if old.truth_poses is not None and new.truth_poses is not None:
+        truth = _cat(old.truth_poses, new.truth_poses)
+    elif old.truth_poses is not None or new.truth_poses is not None:
+        log.warning("--append: only one of the old and new parts has true poses; the merged data keeps none")
+    aps = old.truth_aps if old.truth_aps is not None else new.truth_aps
+    a, b = old.extra.get("truth", {}), new.extra.get("truth", {})
+    extra = {k: _cat(a[k], b[k]).drop_duplicates(ignore_index=True) if k in a and k in b else a.get(k, b.get(k))
+             for k in dict.fromkeys([*a, *b])}
+    return Dataset(walks=_cat(old.walks, new.walks), poses=_cat(old.poses, new.poses),
+                   wifi=_cat(old.wifi, wifi), fixes=_cat(old.fixes, new.fixes), truth_poses=truth,
+                   truth_aps=aps, venue=old.venue if old.venue is not None else new.venue,
+                   extra={"truth": extra})
+
+
+def _cat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
+    """Rows of ``a`` then ``b`` with ``a``'s columns first (a column one side lacks is left empty)."""
+    if not len(b):
+        return a.reset_index(drop=True)
+    if not len(a):
+        return b.reset_index(drop=True)
+    return pd.concat([a, b], ignore_index=True)[list(dict.fromkeys([*a.columns, *b.columns]))]
+
+
+def _report(old: dict[str, Any], ds: Dataset, fp: Fingerprints, new: Dataset, inputs: list[str | Path],
+            reader: str) -> dict:
+    rep = dict(old)
+    rep.update({
+        "walks": len(ds.walks), "poses": len(ds.poses), "readings": len(ds.wifi),
+        "scans": int(ds.wifi.groupby(["walk_id", "t_s"], sort=False).ngroups),
+        "nodes_with_fingerprint": len(fp), "aps": len(fp.bssids), "fixes": len(ds.fixes),
+        "has_truth_poses": ds.truth_poses is not None,
+    })
+    appended = list(old.get("appended", []))
+    appended.append({"inputs": [str(p) for p in inputs], "format": reader, "walks": len(new.walks),
+                     "poses": len(new.poses), "walk_ids": [str(w) for w in new.walks["walk_id"]]})
+    rep["appended"] = appended
+    return rep
