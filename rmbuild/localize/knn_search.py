@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import AbstractContextManager
-from functools import cache
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
+
+from rmbuild.localize.blas import one_blas_thread
 
 #: RPs per block of the blocked product (128: ~0.4 of the dense flops on the `large` preset, few calls).
 RP_BLOCK = 128
@@ -34,15 +33,6 @@ FEW_QUERIES = 8
 THREADS = min(2, os.cpu_count() or 1)
 #: float32 elements of the (RP, query) distance matrix per chunk of queries (8 MB).
 CHUNK_ELEMS = 1 << 21
-
-
-@cache
-def _controller() -> ThreadpoolController:
-    return ThreadpoolController()
-
-
-def _one_blas_thread() -> AbstractContextManager:
-    return _controller().limit(limits=1, user_api="blas")
 
 
 def morton_order(xy: np.ndarray, bits: int = 16) -> np.ndarray:
@@ -111,7 +101,7 @@ class SparseL2Shortlist:
         def run(s: int) -> None:
             out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
 
-        with _one_blas_thread():
+        with one_blas_thread():
             if len(starts) > 1 and THREADS > 1:
                 with ThreadPoolExecutor(THREADS) as ex:
                     list(ex.map(run, starts))
