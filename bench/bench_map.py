@@ -1,9 +1,11 @@
-"""kNN throughput on >= 5,000 reference points vs scikit-learn's brute-force KNeighborsRegressor (one run),
-and export-map time on the `large` preset. Writes bench/results/map.json.
+"""kNN throughput on >= 5,000 reference points vs scikit-learn's brute-force KNeighborsRegressor (5 interleaved
+repetitions, median rates), and export-map time on the `large` preset. Writes bench/results/map.json.
 
 The map is built from the `large` preset's true positions (the RP set is the map nodes' fingerprint
 database: every map node with readings); queries are the test walks' scans. Both methods see the same
-filled matrices (missing = -110 dBm) and K; agreement is checked on every query.
+filled matrices (missing = -110 dBm) and K; agreement is checked on every query, against an exact float64
+brute force: a neighbour set that differs from scikit-learn's is counted as a tie when the K-th and
+(K+1)-th distances are equal.
 """
 
 from __future__ import annotations

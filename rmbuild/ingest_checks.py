@@ -150,8 +150,10 @@ def _group_pairs(members: np.ndarray, row: np.ndarray, ap: np.ndarray, rssi: np.
     """Median differences of the co-located scan pairs of one group (``row``: the member index of each of
     the members' readings ``ap``, ``rssi``), added to both walks' lists."""
     col_ap, cols = np.unique(ap, return_inverse=True)
+    twice = np.bincount(cols)[cols] >= 2  # an AP only one scan heard is never shared: no column for it
+    col_ap, cols = np.unique(ap[twice], return_inverse=True)
     mat = np.full((len(members), len(col_ap)), np.nan)
-    mat[row, cols] = rssi
+    mat[row[twice], cols] = rssi[twice]
     walks = scan_walk[members]
     iu, ju = np.triu_indices(len(members), 1)
     seen = np.isfinite(mat).astype(np.float32)  # counts < 2^24: exact in float32
