@@ -120,3 +120,11 @@ def test_morton_order_is_a_permutation_and_local():
     assert sorted(p.tolist()) == list(range(4096)) and p[-1] == 7
     step = np.hypot(*np.diff(xy[p[:-1]], axis=0).T)
     assert np.median(step) < 3.0  # neighbours along the curve are near in space (random order: ~50 m)
+
+
+def test_a_few_queries_at_once_equal_the_batch():
+    ref, q = _random(seed=7)
+    loc = KnnLocalizer(KnnConfig(k=15)).fit(ref)
+    batch = loc.kneighbors(q)[1]
+    for n in (1, 2, 5, knn_search.FEW_QUERIES, knn_search.FEW_QUERIES + 1):
+        np.testing.assert_array_equal(loc.kneighbors(q[:n])[1], batch[:n])

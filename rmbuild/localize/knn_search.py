@@ -101,6 +101,9 @@ class SparseL2Shortlist:
         def run(s: int) -> None:
             out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
 
+        if nq <= FEW_QUERIES:  # one small product: entering the BLAS limit would cost more than it saves
+            out[:] = self._select(self._distances(aq), c)
+            return out
         with one_blas_thread():
             if len(starts) > 1 and THREADS > 1:
                 with ThreadPoolExecutor(THREADS) as ex:
