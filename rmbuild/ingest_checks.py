@@ -53,16 +53,21 @@ def evidence_warnings(ds: Dataset) -> list[str]:
 def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series) -> pd.Series:
     """Per walk, an order-independent digest of its rows (times relative to the walk's first pose,
     values rounded): equal digests mean equal rows."""
+    codes, names = pd.factorize(df["walk_id"])
     rel = df[cols].copy()  # the walk id itself is not hashed: a copy has another one
-    rel["t_s"] = np.round(rel["t_s"].to_numpy(float) - t0.reindex(df["walk_id"]).to_numpy(float), 3)
+    rel["t_s"] = np.round(rel["t_s"].to_numpy(float) - t0.reindex(names).to_numpy(float)[codes], 3)
     for c in cols:
         if c != "t_s" and pd.api.types.is_float_dtype(rel[c]):
             rel[c] = np.round(rel[c].to_numpy(float), 3)
+        elif c != "t_s" and not pd.api.types.is_numeric_dtype(rel[c]):
+            rel[c] = pd.factorize(rel[c])[0]  # equal text, equal code: hashing codes is hashing the text here
     h = pd.util.hash_pandas_object(rel, index=False).to_numpy()
-    g = pd.Series(h, index=df["walk_id"].to_numpy()).groupby(level=0, sort=False)
+    g = pd.Series(h, index=codes).groupby(level=0, sort=False)
     # sum and xor of 64-bit row hashes, and the row count: a multiset digest
-    return g.sum().astype(str) + ":" + g.agg(lambda x: np.bitwise_xor.reduce(x.to_numpy())).astype(str) + ":" + \
+    out = g.sum().astype(str) + ":" + g.agg(lambda x: np.bitwise_xor.reduce(x.to_numpy())).astype(str) + ":" + \
         g.size().astype(str)
+    out.index = names[out.index.to_numpy()]
+    return out
 
 
 def duplicate_walks(ds: Dataset) -> list[str]:
@@ -117,13 +122,17 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     top = pd.Series(scan[first]).groupby(ap[first]).agg(list)
     rng = np.random.default_rng(seed)
     diffs: list[list[float]] = [[] for _ in walk_names]
+    by_scan = np.argsort(scan, kind="stable")  # the readings of scan s: by_scan[start[s]:start[s + 1]]
+    start = np.searchsorted(scan[by_scan], np.arange(len(scan_walk) + 1))
     for members in sorted(top, key=len, reverse=True)[:MAX_GROUPS]:
         m = np.asarray(members)
         if len(np.unique(scan_walk[m])) < 2:
             continue
         if len(m) > MAX_GROUP_SCANS:
             m = rng.choice(m, MAX_GROUP_SCANS, replace=False)
-        _group_pairs(m, scan, ap, rssi, scan_walk, diffs)
+        rows = np.concatenate([by_scan[start[s]:start[s + 1]] for s in m])
+        member = np.repeat(np.arange(len(m)), start[m + 1] - start[m])
+        _group_pairs(m, member, ap[rows], rssi[rows], scan_walk, diffs)
     return {str(walk_names[w]): float(np.median(d)) for w, d in enumerate(diffs) if len(d) >= MIN_PAIRS}
 
 
@@ -136,17 +145,18 @@ def _row_nanmedian(a: np.ndarray) -> np.ndarray:
     return 0.5 * (lo + hi)
 
 
-def _group_pairs(members: np.ndarray, scan: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray,
+def _group_pairs(members: np.ndarray, row: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray,
                  diffs: list[list[float]]) -> None:
-    """Median differences of the co-located scan pairs of one group, added to both walks' lists."""
-    sel = np.isin(scan, members)
-    row = pd.Index(members).get_indexer(scan[sel])
-    cols, col_ap = pd.factorize(ap[sel])
+    """Median differences of the co-located scan pairs of one group (``row``: the member index of each of
+    the members' readings ``ap``, ``rssi``), added to both walks' lists."""
+    col_ap, cols = np.unique(ap, return_inverse=True)
+    twice = np.bincount(cols)[cols] >= 2  # an AP only one scan heard is never shared: no column for it
+    col_ap, cols = np.unique(ap[twice], return_inverse=True)
     mat = np.full((len(members), len(col_ap)), np.nan)
-    mat[row, cols] = rssi[sel]
+    mat[row[twice], cols] = rssi[twice]
     walks = scan_walk[members]
     iu, ju = np.triu_indices(len(members), 1)
-    seen = np.isfinite(mat).astype(np.int32)
+    seen = np.isfinite(mat).astype(np.float32)  # counts < 2^24: exact in float32
     shared = (seen @ seen.T)[iu, ju]
     ok = (walks[iu] != walks[ju]) & (shared >= MIN_SHARED_APS)
     if not ok.any():

@@ -399,7 +399,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     }
     if reports:
         summary["pdr"] = _pdr_summary(reports)
-    no_wifi = sorted(set(ds.walks["walk_id"].astype(str)) - set(ds.wifi["walk_id"].astype(str)))
+    no_wifi = sorted(set(ds.walks["walk_id"].astype(str)) - set(ds.wifi["walk_id"].astype(str).unique()))
     if no_wifi:
         summary["warnings"].append(
             f"{len(no_wifi)} walk(s) without Wi-Fi readings kept without radio evidence (placed only by session "
@@ -420,27 +420,33 @@ def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_ga
     """True poses at the rows of ``poses``: matched on (walk_id, t_s) where the times agree, otherwise
     interpolated in time along the walk's true track (e.g. steps found by the PDR), clamped to the ends up
     to ``max_gap_s``; a pose further outside its walk's truth is an error."""
-    key = pd.MultiIndex.from_arrays([truth["walk_id"], truth["t_s"]])
-    if key.has_duplicates:
-        i = _first(key.duplicated())
-        raise InputError("truth poses: duplicate (walk_id, t_s)", _where(raw, "truth/poses")(i))
+    tcodes, tnames = pd.factorize(truth["walk_id"])
+    tt_all = truth["t_s"].to_numpy(float)
+    order = np.lexsort((tt_all, tcodes))  # by walk, then time; file order among equal keys
+    sc, st = tcodes[order], tt_all[order]
+    dup = (sc[1:] == sc[:-1]) & (st[1:] == st[:-1])
+    if dup.any():
+        raise InputError("truth poses: duplicate (walk_id, t_s)", _where(raw, "truth/poses")(int(order[1:][dup].min())))
     out = pd.DataFrame({"walk_id": poses["walk_id"].to_numpy(), "step": poses["step"].to_numpy(),
                         "t_s": poses["t_s"].to_numpy(float)})
     xyh = np.full((len(poses), 3), np.nan)
-    tw = truth["walk_id"].to_numpy()
+    start = np.searchsorted(sc, np.arange(len(tnames) + 1))
+    tx, ty, th = (truth[c].to_numpy(float)[order] for c in ("x_m", "y_m", "heading_rad"))
+    t_all = out["t_s"].to_numpy()
     for wid, rows in out.groupby("walk_id", sort=False).indices.items():
-        g = truth[tw == wid].sort_values("t_s")
-        t = out["t_s"].to_numpy()[rows]
-        if len(g) == 0 or (t < g["t_s"].iloc[0] - max_gap_s).any() or (t > g["t_s"].iloc[-1] + max_gap_s).any():
+        k = tnames.get_indexer([wid])[0]
+        blk = slice(start[k], start[k + 1]) if k >= 0 else slice(0, 0)
+        tt = st[blk]
+        t = t_all[rows]
+        if len(tt) == 0 or (t < tt[0] - max_gap_s).any() or (t > tt[-1] + max_gap_s).any():
             i = int(rows[0])
-            at = _where(raw, "truth/poses")(_first(tw == wid)) if len(g) else _where(raw, "poses")(i)
+            at = _where(raw, "truth/poses")(int(order[blk].min())) if len(tt) else _where(raw, "poses")(i)
             raise InputError(
                 f"truth poses do not cover pose (walk {_v(poses['walk_id'].iloc[i])}, "
                 f"t_s={_v(poses['t_s'].iloc[i])})", at)
-        tt = g["t_s"].to_numpy(float)
-        xyh[rows, 0] = np.interp(t, tt, g["x_m"].to_numpy(float))
-        xyh[rows, 1] = np.interp(t, tt, g["y_m"].to_numpy(float))
-        h = np.interp(t, tt, np.unwrap(g["heading_rad"].to_numpy(float)))
+        xyh[rows, 0] = np.interp(t, tt, tx[blk])
+        xyh[rows, 1] = np.interp(t, tt, ty[blk])
+        h = np.interp(t, tt, np.unwrap(th[blk]))
         xyh[rows, 2] = wrap(h)
     out["x_m"], out["y_m"], out["heading_rad"] = xyh[:, 0], xyh[:, 1], xyh[:, 2]
     return out[["walk_id", "step", "t_s", "x_m", "y_m", "heading_rad"]]

@@ -123,14 +123,15 @@ class Fingerprints:
         rss = wifi["rssi_dbm"].to_numpy(dtype=np.float64)[keep]
         nodes, row = np.unique(node_raw, return_inverse=True)
         n, m = len(nodes), len(bssids)
-        flat = row * m + col
-        sums = np.bincount(flat, weights=rss, minlength=n * m).reshape(n, m)
-        cnt = np.bincount(flat, minlength=n * m).reshape(n, m)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(cnt > 0, sums / np.maximum(cnt, 1), np.nan)
-        return Fingerprints(
-            nodes, np.asarray(bssids, dtype=object), mean.astype(np.float32), cnt.astype(np.int32)
-        )
+        # sums over the detected (node, AP) cells only: the dense (n, m) tables are written once
+        cells, inv = np.unique(row * m + col, return_inverse=True)
+        sums = np.bincount(inv, weights=rss, minlength=len(cells))
+        cnt_c = np.bincount(inv, minlength=len(cells))
+        mean = np.full(n * m, np.nan, dtype=np.float32)
+        mean[cells] = sums / cnt_c
+        cnt = np.zeros(n * m, dtype=np.int32)
+        cnt[cells] = cnt_c
+        return Fingerprints(nodes, np.asarray(bssids, dtype=object), mean.reshape(n, m), cnt.reshape(n, m))
 
     def to_long(self) -> pd.DataFrame:
         """Long table: node, bssid, rssi_dbm, count (one row per detected (node, AP))."""

@@ -1,8 +1,9 @@
 """FL / kNN and distance-weighted kNN fingerprint localizers (He et al. 2015; Chen et al. 2018 eq. 3-4).
 
-The neighbour search is a blocked float32 matrix product (the fastest batch option measured; bench/bench_map.py)
-that shortlists ``K + margin`` candidates per query, followed by an exact float64 re-rank of the
-shortlist, so neighbours and distances equal a float64 brute-force search (up to exact ties).
+The neighbour search shortlists ``K + margin`` candidates per query in float32, then re-ranks the shortlist
+exactly in float64, so neighbours and distances equal a float64 brute-force search (up to exact ties). The
+default (fill, euclidean) shortlist exploits sparse fingerprints (:mod:`rmbuild.localize.knn_search`); the
+other metrics use dense float32 matrix products. Throughput against scikit-learn: bench/bench_map.py.
 
 With ``a = rss − fill`` (0 where missing) and ``b`` the detection indicator:
 
@@ -21,9 +22,13 @@ import numpy as np
 
 from rmbuild.config.evaluate import EvaluateConfig, KnnConfig
 from rmbuild.localize.base import Query, ReferenceSet, as_reference
+from rmbuild.localize.knn_search import SparseL2Shortlist
 
 #: float32 elements per block of the distance matrix (memory bound of one block: 4 bytes each).
 _BLOCK_ELEMS = 1 << 21
+#: extra candidates beyond K in the float32 shortlist, re-ranked in float64 (float32 rounding moves a
+#: distance by far less than the gap between 8 ranks).
+_MARGIN = 8
 
 
 class KnnLocalizer:
@@ -59,6 +64,8 @@ class KnnLocalizer:
         self._sq = (a * a).sum(axis=1)
         self._sq32 = (self._a * self._a)
         self._sq32n = self._sq.astype(np.float32)
+        plain = self.cfg.missing == "fill" and self.cfg.metric == "euclidean"
+        self._shortlist = SparseL2Shortlist(a, ref.xy) if plain else None
         return self
 
     # ------------------------------------------------------------ distances
@@ -112,6 +119,15 @@ class KnnLocalizer:
             d2[shared < self.cfg.min_shared_aps] = np.inf
         return d2
 
+    def _candidates(self, a: np.ndarray, b: np.ndarray, c: int) -> np.ndarray:
+        """(nq, c) RP indices holding each query's ``c`` nearest by the float32 distances."""
+        if self._shortlist is not None:
+            return self._shortlist.candidates(a, c)
+        d2 = self._approx_d2(a, b)
+        if c < d2.shape[1]:
+            return np.argpartition(d2, c - 1, axis=1)[:, :c]
+        return np.broadcast_to(np.arange(d2.shape[1]), d2.shape).copy()
+
     def kneighbors(self, rss_dbm: np.ndarray, k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """K nearest RPs of each query row (NaN = missing, columns in the reference's AP order).
 
@@ -122,7 +138,7 @@ class KnnLocalizer:
             raise RuntimeError("fit() first")
         n_rp = len(self.ref)
         k = min(k or self.cfg.k, n_rp)
-        c = min(n_rp, k + 8)
+        c = min(n_rp, k + _MARGIN)
         nq = len(rss_dbm)
         dist = np.full((nq, k), np.inf)
         idx = np.full((nq, k), -1, dtype=np.int64)
@@ -130,11 +146,7 @@ class KnnLocalizer:
         block = max(1, min(_BLOCK_ELEMS // max(n_rp, 1), _BLOCK_ELEMS // (c * n_ap)))
         for s in range(0, nq, block):
             a, b = self._prep_query(rss_dbm[s:s + block])
-            d2 = self._approx_d2(a, b)
-            if c < n_rp:
-                cand = np.argpartition(d2, c - 1, axis=1)[:, :c]
-            else:
-                cand = np.broadcast_to(np.arange(n_rp), d2.shape).copy()
+            cand = self._candidates(a, b, c)
             e2 = self._exact_d2(a, b, cand)
             o = np.argsort(e2, axis=1, kind="stable")[:, :k]
             e2 = np.take_along_axis(e2, o, axis=1)

@@ -43,6 +43,7 @@ import pandas as pd
 from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
+from rmbuild.localize.blas import one_blas_thread
 from rmbuild.localize.calibration import to_map_units
 
 log = logging.getLogger(__name__)
@@ -58,29 +59,51 @@ def berhu(z: np.ndarray, t: float) -> np.ndarray:
 def project_capped_simplex(y: np.ndarray, cap: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Euclidean projection of each row of ``y`` (..., N) onto {Σω = 1, 0 ≤ ω ≤ cap, ω = 0 where not valid}.
 
-    ``cap`` (...,) per row with cap · (valid entries) >= 1. Exact: the row sum s(τ) = Σ clip(y − τ, 0, cap)
-    is piecewise linear in τ with breakpoints y and y − cap; it is evaluated at all of them and
-    interpolated where it crosses 1.
+    ``cap`` (...,) per row with cap · (valid entries) >= 1. See :class:`CappedSimplexProjection`."""
+    return CappedSimplexProjection(cap, valid)(y)
+
+
+class CappedSimplexProjection:
+    """Projection onto the capped simplex of fixed ``cap`` (...,) and ``valid`` (..., N), for many ``y``.
+
+    Exact: ω = clip(y − τ, 0, cap) where the row sum s(τ) = Σ relu(y − τ) − relu(y − cap − τ) crosses 1.
+    s is piecewise linear with breakpoints y and y − cap; sorted in descending order (v_m with signs ±1),
+    s(v_m) = Σ_{j<m} sign_j v_j − v_m Σ_{j<m} sign_j comes from two cumulative sums, and τ is interpolated
+    between the breakpoints around the crossing (2.5x faster than evaluating s at every breakpoint by
+    broadcasting, for SLAC's 60 x 7 rows of 10). What does not depend on ``y`` is prepared once.
     """
-    shp = y.shape
-    n = shp[-1]
-    y2 = y.reshape(-1, n)
-    c = np.broadcast_to(cap, shp[:-1]).reshape(-1, 1)
-    v = valid.reshape(-1, n)
-    lo = np.where(v, y2, np.inf).min(axis=1, keepdims=True)
-    y2 = np.where(v, y2, lo - 4.0 * c - 1.0)  # invalid entries never rise above 0
-    bp = np.sort(np.concatenate([y2, y2 - c], axis=1), axis=1)  # (R, 2N)
-    s = np.clip(y2[:, None, :] - bp[:, :, None], 0.0, c[:, :, None])
-    s = np.where(v[:, None, :], s, 0.0).sum(axis=2)  # (R, 2N), non-increasing
-    j = (s >= 1.0).sum(axis=1)  # s[j-1] >= 1 > s[j]
-    j = np.clip(j, 1, 2 * n - 1)
-    r = np.arange(len(bp))
-    b0, b1, s0, s1 = bp[r, j - 1], bp[r, j], s[r, j - 1], s[r, j]
-    den = s0 - s1
-    tau = np.where(den > 1e-15, b0 + (s0 - 1.0) * (b1 - b0) / np.where(den > 1e-15, den, 1.0), b0)
-    w = np.where(v, np.clip(y2 - tau[:, None], 0.0, c), 0.0)
-    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rounding only
-    return w.reshape(shp)
+
+    def __init__(self, cap: np.ndarray, valid: np.ndarray) -> None:
+        self.shape = valid.shape
+        n = self.n = valid.shape[-1]
+        self.c = np.broadcast_to(cap, valid.shape[:-1]).reshape(-1, 1)
+        self.v = valid.reshape(-1, n)
+        self.invalid = ~self.v
+        self.rows = np.arange(0, self.v.size * 2, 2 * n)  # flat offsets of the (R, 2N) breakpoint rows
+        self.tri = np.triu(np.ones((2 * n, 2 * n)))  # cumulative sums as one product (2x np.cumsum on rows of 20)
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        n, c = self.n, self.c
+        y2 = y.reshape(-1, n)
+        lo = np.where(self.v, y2, np.inf).min(axis=1, keepdims=True)
+        y2 = np.where(self.v, y2, lo - 4.0 * c - 1.0)  # invalid entries never rise above 0
+        vals = np.concatenate([y2, y2 - c], axis=1)  # (R, 2N)
+        o = np.argsort(-vals, axis=1)
+        sg = np.where(o < n, 1.0, -1.0)
+        o += self.rows[:, None]  # flat indices: plain takes, no per-call index building
+        vs = vals.take(o)
+        s = (sg * vs) @ self.tri
+        s -= vs * (sg @ self.tri)  # s(v_m), non-decreasing in m
+        j = np.minimum(np.maximum((s < 1.0).sum(axis=1), 1), 2 * n - 1)  # s[j-1] < 1 <= s[j]
+        j += self.rows
+        b0, b1, s0, s1 = vs.take(j - 1), vs.take(j), s.take(j - 1), s.take(j)
+        den = s1 - s0
+        ok = den > 1e-15
+        tau = np.where(ok, b0 + (1.0 - s0) * (b1 - b0) / np.where(ok, den, 1.0), b1)
+        w = np.minimum(np.maximum(y2 - tau[:, None], 0.0), c)
+        w[self.invalid] = 0.0
+        w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)  # rounding only
+        return w.reshape(self.shape)
 
 
 def greedy_capped(gam: np.ndarray, cap: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -261,27 +284,41 @@ class SlacLocalizer:
         return self
 
     # ------------------------------------------------------------- signals
-    def _scan_terms(self, rss: np.ndarray) -> np.ndarray:
-        """(6, n, Q) sums over shared APs: Σφ², Σφ, |S|, Σφψ̄, Σψ̄, Σ(ψ̄² + σ²)."""
+    def _scan_terms(self, rss: np.ndarray, ok: np.ndarray | None = None) -> np.ndarray:
+        """(6, n, Q) sums over shared APs: Σφ², Σφ, |S|, Σφψ̄, Σψ̄, Σ(ψ̄² + σ²). With ``ok`` (n, Q), all
+        but |S| only where ok (0 elsewhere), each scan's over its own detected APs (a scan hears ~1/10 of
+        them, and an RP covers few scans)."""
         det = ~np.isnan(rss)
         phi = np.where(det, rss.astype(np.float64), 0.0)
         b = det.astype(np.float64)
-        q = np.stack([phi * phi, phi, b])  # (3, n, L)
-        t1 = q @ self._B.T  # (3, n, Q)
-        return np.concatenate([t1, (phi @ self._Psi.T)[None], (b @ self._Psi.T)[None],
-                               (b @ self._S2.T)[None]])
+        if ok is None:
+            t1 = np.stack([phi * phi, phi, b]) @ self._B.T  # (3, n, Q)
+            return np.concatenate([t1, (phi @ self._Psi.T)[None], (b @ self._Psi.T)[None],
+                                   (b @ self._S2.T)[None]])
+        out = np.zeros((6,) + ok.shape)
+        out[2] = b @ self._B.T
+        for i in range(len(rss)):
+            q, j = np.flatnonzero(ok[i]), np.flatnonzero(det[i])
+            if not len(q):
+                continue
+            sub = np.ix_(q, j)
+            bq, pq, f = self._B[sub], self._Psi[sub], phi[i, j]
+            out[0, i, q], out[1, i, q], out[3, i, q] = bq @ (f * f), bq @ f, pq @ f
+            out[4, i, q], out[5, i, q] = pq.sum(axis=1), self._S2[sub].sum(axis=1)
+        return out
 
     @staticmethod
     def _gamma(terms: np.ndarray, kp: np.ndarray, bp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Γ (P, W, Q) for map-unit parameters kp, bp (P,) and scan terms (6, W, Q); inf where |S| = 0.
-        Also |S| (W, Q)."""
-        a1, a2, a3, a4, a5, a6 = terms
-        k = kp[:, None, None]
-        b = bp[:, None, None]
-        num = k * k * a1 + 2 * k * b * a2 + b * b * a3 - 2 * k * a4 - 2 * b * a5 + a6
+        Also |S| (W, Q). The numerator is one matrix product of the (P, 6) polynomial coefficients in k, b."""
+        a3 = terms[2]
+        coef = np.stack([kp * kp, 2 * kp * bp, bp * bp, -2 * kp, -2 * bp, np.ones_like(kp)], axis=1)
+        num = (coef @ terms.reshape(6, -1)).reshape((len(kp),) + a3.shape)
+        np.maximum(num, 0.0, out=num)
         with np.errstate(divide="ignore", invalid="ignore"):
-            g = np.where(a3 > 0, np.maximum(num, 0.0) / np.where(a3 > 0, a3, 1.0), np.inf)
-        return g, a3
+            num /= np.where(a3 > 0, a3, 1.0)
+        num[:, a3 <= 0] = np.inf
+        return num, a3
 
     def _detection_ll(self, cand: np.ndarray, det: np.ndarray, kk: np.ndarray, bb: np.ndarray) -> np.ndarray:
         """(P, N) log-probability of which of each candidate RP's APs the scan detected (ours): an AP the
@@ -290,13 +327,14 @@ class SlacLocalizer:
         cfg = self.cfg
         from scipy.special import ndtr
 
-        psi = self._Psi[cand]  # (P, N, L)
-        rp_det = self._B[cand] > 0
+        aps = np.flatnonzero(self._B[np.unique(cand)].any(axis=0))  # only APs some candidate hears count
+        psi = self._Psi[cand[..., None], aps]  # (P, N, A)
+        rp_det = self._B[cand[..., None], aps] > 0
         k = np.abs(kk)[:, None, None]
         pred = (psi - bb[:, None, None]) / k
         p = (1.0 - cfg.miss_prob) * ndtr((pred - cfg.detect_floor_dbm) * k / cfg.signal_sigma_db)
         p = np.clip(p, 1e-6, 1.0 - 1e-6)
-        ll = np.where(det[None, None, :], np.log(p), np.log1p(-p))
+        ll = np.where(det[aps], np.log(p), np.log1p(-p))
         return np.where(rp_det, ll, 0.0).sum(axis=2)
 
     # ------------------------------------------------------------- solver
@@ -323,34 +361,35 @@ class SlacLocalizer:
         lo_b, hi_b = cfg.beta_range
         eta_a = 0.25 * t / (float((fs * fs).sum()) + 1e-9)
         eta_b = 0.25 * t / (float((cn * cn).sum()) + 1e-9)
+        centre = (r_c - rc)[:, :, 0, :]  # (P, W, 2): each row's centre
+        rct = np.ascontiguousarray(np.moveaxis(rc, 3, 2))  # (P, W, 2, N)
         w = w0
+        project = CappedSimplexProjection(cap, valid)
+        eps2 = eps * eps
+        freq = cfg.step_source == "frequency"
         for it in range(cfg.solver_iters):
-            x = (w[..., None] * rc).sum(axis=2)  # centred coordinates of each window scan
-            x = x + (r_c - rc)[:, :, 0, :]  # add back the row centre
+            x = np.einsum("pwkn,pwn->pwk", rct, w) + centre  # (P, W, 2) position of each window scan
             dx = x[:, 1:] - x[:, :-1]
-            d = np.sqrt((dx * dx).sum(axis=2) + eps * eps)
-            delta = (alpha * fs + beta * cn) if cfg.step_source == "frequency" else dist_pdr[1:]
-            z = d - delta
-            az = np.abs(z)
-            gz = np.where(az <= t, z / np.sqrt(z * z + eps * eps), z / t)  # (P, W-1)
-            gseg = gz[..., None] * dx / d[..., None]
+            d = np.sqrt(np.einsum("pwk,pwk->pw", dx, dx) + eps2)
+            z = d - ((alpha * fs + beta * cn) if freq else dist_pdr[1:])
+            gz = np.where(np.abs(z) <= t, z / np.sqrt(z * z + eps2), z / t)  # (P, W-1)
+            gseg = dx * (gz / d)[..., None]
             gx = np.zeros_like(x)
-            gx[:, 1:] += gseg
+            gx[:, 1:] = gseg
             gx[:, :-1] -= gseg
-            gw = (gx[:, :, None, :] * rc).sum(axis=3)
+            gw = np.einsum("pwk,pwkn->pwn", gx, rct)  # (P, W, N)
             decay = 1.0 / np.sqrt(1.0 + it / 10.0)
-            w = project_capped_simplex(w - (eta * decay)[..., None] * gw, cap, valid)
+            w = project(w - (eta * decay)[..., None] * gw)
             # signal bound: retract towards the least-cost point when violated
-            cost = (gcost * w).sum(axis=(1, 2))
+            cost = np.einsum("pwn,pwn->p", gcost, w)
             over = cost > gamma
             if over.any():
-                s = np.where(over, (gamma - cost0) / np.maximum(cost - cost0, 1e-12), 1.0)
-                w = w0 + s[:, None, None] * (w - w0)
+                sc = np.where(over, (gamma - cost0) / np.maximum(cost - cost0, 1e-12), 1.0)
+                w = w0 + sc[:, None, None] * (w - w0)
             if use_model:
-                ga = -(theta[:, None] * gz * fs).sum()
-                gb = -(theta[:, None] * gz * cn).sum()
-                alpha = float(np.clip(alpha - eta_a * decay * ga, lo_a, hi_a))
-                beta = float(np.clip(beta - eta_b * decay * gb, lo_b, hi_b))
+                tg = theta @ gz
+                alpha = min(max(alpha + eta_a * decay * float(tg @ fs), lo_a), hi_a)
+                beta = min(max(beta + eta_b * decay * float(tg @ cn), lo_b), hi_b)
         return w, alpha, beta
 
     # ------------------------------------------------------------- predict
@@ -363,7 +402,8 @@ class SlacLocalizer:
         self.diagnostics = {}
         for wid, rows in q.walks():
             steps = None if q.steps is None else q.steps.get(wid)
-            xy, res = self.localize_walk(q.rss_dbm[rows], q.t_s[rows], steps, wid)
+            with one_blas_thread():
+                xy, res = self.localize_walk(q.rss_dbm[rows], q.t_s[rows], steps, wid)
             out[rows] = xy
             self.diagnostics[wid] = res
         return out
@@ -437,12 +477,13 @@ class SlacLocalizer:
             # steps with a missing frequency count at the walk's median frequency
             nan_cnt = np.array([np.isnan(f).sum() for f in st.freqs], dtype=float)
             st.fsum = st.fsum + nan_cnt * fmed
-        terms = self._scan_terms(rss)
-        has_rp = (terms[2] > 0).any(axis=1)  # scan shares an AP with at least one RP
+        shared = (~np.isnan(rss)).astype(np.float64) @ self._B.T  # (n, Q) APs each RP shares with each scan
+        has_rp = (shared > 0).any(axis=1)  # scan shares an AP with at least one RP
         # coverage: an RP must share >= min_shared_fraction of the scan's APs (or the best any RP shares)
         n_scan_ap = (~np.isnan(rss)).sum(axis=1)
-        need = np.minimum(np.ceil(cfg.min_shared_fraction * n_scan_ap - 1e-9), terms[2].max(axis=1))
-        coverage_ok = terms[2] >= np.maximum(need, 1.0)[:, None]
+        need = np.minimum(np.ceil(cfg.min_shared_fraction * n_scan_ap - 1e-9), shared.max(axis=1))
+        coverage_ok = shared >= np.maximum(need, 1.0)[:, None]
+        terms = self._scan_terms(rss, coverage_ok)  # Γ is only ever needed where an RP covers the scan
         if not has_rp.all():
             fallbacks.append("scan:no_shared_ap")
         acc = _carried_steps(st, has_rp)
@@ -463,9 +504,15 @@ class SlacLocalizer:
         cfg = self.cfg
         kk, bb = to_map_units(pt.kp, pt.bp, cfg.device_model)
         kk, bb = np.atleast_1d(kk), np.atleast_1d(bb)
-        gam, shared = self._gamma(wd.terms[:, win], kk, bb)
-        gam = np.where(wd.coverage_ok[win][None], gam, np.inf)
+        ok = wd.coverage_ok[win]
+        rps = np.flatnonzero(ok.any(axis=0))  # only RPs that cover a window scan can be candidates
+        if len(rps) < cfg.n_candidates:
+            rps = np.arange(ok.shape[1])
+        gam, _ = self._gamma(wd.terms[:, win][:, :, rps], kk, bb)
+        gam[:, ~ok[:, rps]] = np.inf
         cand, gc, gz, valid, lam = _candidates(gam, cfg.n_candidates)
+        cand = rps[cand]
+        shared = wd.terms[2][win]
         r_c = self._xy[cand]
         p_cur = gam.shape[0]
         acc_c, acc_f, acc_l = wd.acc[0][win], wd.acc[1][win], wd.acc[2][win]

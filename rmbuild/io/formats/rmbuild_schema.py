@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.errors import InputError, one_line
@@ -82,6 +83,7 @@ def _table_of(p: Path) -> str | None:
 #: columns; no table of the schema (nor a truth table) has more than a dozen
 MAX_COLUMNS = 1000
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
+_ARROW_STR = pd.ArrowDtype(pa.string())
 NUMERIC_NA = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "null", "NULL", "None", "<NA>"]
 
 
@@ -200,8 +202,13 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
                 return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""],
                                    index_col=False)
             strs = [c for c, k in schema.items() if k == "str"]
-            return pd.read_csv(path, skipinitialspace=True, dtype={c: str for c in strs}, keep_default_na=False,
-                               na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+            # read as Arrow strings (as fast as no dtype; dtype=str was 2x slower), then the usual str dtype
+            df = pd.read_csv(path, skipinitialspace=True, dtype={c: _ARROW_STR for c in strs}, keep_default_na=False,
+                             na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+            for c in strs:
+                if c in df.columns:
+                    df[c] = df[c].astype(str)
+            return df
     except InputError:
         raise
     except pd.errors.ParserWarning:

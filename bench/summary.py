@@ -1,0 +1,124 @@
+"""bench/results/SUMMARY.md: one table of every benchmark's headline figures, their targets and whether
+they are met, read from the JSON files beside it (``python -m bench.summary``; also the end of
+``python -m bench.run_all``). A figure whose JSON (or key) is missing shows as "not run"."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bench.common import RESULTS
+
+
+@dataclass(frozen=True)
+class Row:
+    """One headline figure: which JSON, a label, how to read it, its unit, and its target (text and test)."""
+
+    source: str
+    label: str
+    get: Callable[[dict], Any]
+    unit: str = ""
+    target: str = ""
+    met: Callable[[Any], bool] | None = None
+
+
+def _case(d: dict, preset: str, mode: str) -> dict:
+    return next(c for c in d["cases"] if c["preset"] == preset and c["mode"] == mode)
+
+
+def _loc(d: dict, case: str, name: str, key: str = "mean") -> Any:
+    return d["cases"][case]["localizers"][name][key]
+
+
+ROWS: list[Row] = [
+    Row("ingest", "ingest `large` / bare `pandas.read_csv` of the same files", lambda d: d["ratio_ingest_to_read_csv"],
+        "×", "≤ 3", lambda v: v <= 3.0),
+    Row("ingest", "ingest `large` readings per second", lambda d: d["ingest_readings_per_s"], "/s"),
+    Row("map", "kNN batch vs scikit-learn brute force (8,625 RPs × 186 APs, K = 15)",
+        lambda d: d["knn"]["speedup_batch"], "×", "≥ 3", lambda v: v >= 3.0),
+    Row("map", "kNN one query at a time vs scikit-learn brute force", lambda d: d["knn"]["speedup_one_at_a_time"],
+        "×", "≥ 10", lambda v: v >= 10.0),
+    Row("map", "kNN neighbour sets differing from float64 brute force other than at exact ties",
+        lambda d: d["knn"]["differing_sets_not_ties"], "", "0", lambda v: v == 0),
+    Row("map", "export-map `large` (tables, figures, writes)", lambda d: d["export_map"]["total_s"], "s"),
+    Row("optimize", "optimize `large` (50,508 poses, 100 walks) total",
+        lambda d: _case(d, "large", "robust")["time_s"]["optimize_total"], "s", "≤ 60", lambda v: v <= 60.0),
+    Row("optimize", "optimize `large` peak memory", lambda d: _case(d, "large", "robust")["peak_memory_mb"], "MB",
+        "≤ 8,000", lambda v: v <= 8000.0),
+    Row("optimize", "optimize 500,000 poses (a venue-month of walks)",
+        lambda d: _case(d, "month", "robust")["time_s"]["optimize_total"], "s", "≤ 300 and ≤ 8 GB",
+        lambda v: v <= 300.0),
+    Row("optimize", "optimize `large`: linked walks' mean error",
+        lambda d: _case(d, "large", "robust")["optimized_linked_walks"]["linked_mean_m"], "m"),
+    Row("localizers", "SLAC per scan (P = 60, M = 7, 3,310 RPs)",
+        lambda d: d["latency"]["localizers"]["slac"]["ms_per_scan"], "ms", "≤ 20", lambda v: v <= 20.0),
+    Row("localizers", "slowest localizer per scan (real-time budget 2 s)",
+        lambda d: max(v["ms_per_scan"] for v in d["latency"]["localizers"].values()), "ms", "≤ 2,000",
+        lambda v: v <= 2000.0),
+    Row("localizers", "SLAC mean error, synthetic other device", lambda d: _loc(d, "synthetic / other device", "slac"),
+        "m"),
+    Row("localizers", "SLAC mean error, IPIN −2 (A5 map, S7 tests)",
+        lambda d: _loc(d, "IPIN -2: A5 map, S7 tests", "slac"), "m"),
+    Row("localizers", "kNN mean error, ILC site1/F1 (surveyed map)",
+        lambda d: _loc(d, "ILC site1/F1 (surveyed)", "knn"), "m"),
+    Row("viz", "rerun recording / optimize time (`large`)", lambda d: d["ratio_view_to_optimize"], "×", "≤ 0.25",
+        lambda v: v <= 0.25),
+    Row("real", "real floors: walks linked", lambda d: ", ".join(
+        f"{f['floor']} {f['linked_pct']:.0f} %" for f in d["floors"])),
+    Row("real", "real floors: kNN median, map built / surveyed", lambda d: ", ".join(
+        f"{f['floor']} {f['knn']['ratio']:.2f}×" for f in d["floors"])),
+    Row("bench_pdr", "phone PDR own-fit median error per ILC floor", lambda d: ", ".join(
+        f"{k} {v['own_fit_median_m']:.2f}" for k, v in d["ilc"].items()), "m"),
+    Row("fuzz", "fuzzed inputs ending otherwise than exit 0 / one-line exit 2", lambda d: d["failures"], "",
+        "0", lambda v: v == 0),
+]
+
+
+def _fmt(v: Any, unit: str) -> str:
+    if isinstance(v, float):
+        v = f"{v:,.3g}" if abs(v) < 100 else f"{v:,.0f}"
+    elif isinstance(v, int) and not isinstance(v, bool):
+        v = f"{v:,}"
+    return f"{v} {unit}".strip() if unit not in ("×",) else f"{v}×"
+
+
+def summary_lines(results: Path = RESULTS) -> list[str]:
+    """Markdown lines of the summary table (one row per :data:`ROWS` entry)."""
+    cache: dict[str, dict | None] = {}
+    lines = ["| benchmark | figure | value | target | met |", "|---|---|---|---|---|"]
+    for r in ROWS:
+        if r.source not in cache:
+            p = results / f"{r.source}.json"
+            cache[r.source] = json.loads(p.read_text()) if p.exists() else None
+        data = cache[r.source]
+        try:
+            value = r.get(data) if data is not None else None
+        except (KeyError, StopIteration, TypeError, ValueError):
+            value = None
+        if value is None:
+            shown, met = "not run", ""
+        else:
+            shown = _fmt(value, r.unit)
+            met = "" if r.met is None else ("yes" if r.met(value) else "**no**")
+        lines.append(f"| {r.source} | {r.label} | {shown} | {r.target or '—'} | {met} |")
+    return lines
+
+
+def write_summary(results: Path = RESULTS) -> Path:
+    """Write SUMMARY.md beside the JSON files; returns its path."""
+    lines = ["# Benchmark results", "",
+             "Headline figures of `make bench` (`python -m bench.run_all`), read from the JSON files beside this "
+             "one, which hold every figure and the machine. Timings are wall-clock on a 2-core machine shared "
+             "with other jobs: compare ratios measured in one run (each benchmark says how it repeats them).", ""]
+    lines += summary_lines(results)
+    lines += ["", "Localizer accuracy per test bed: `localizers.md`; real floors: `real.md`.", ""]
+    p = results / "SUMMARY.md"
+    p.write_text("\n".join(lines))
+    return p
+
+
+if __name__ == "__main__":
+    print(write_summary().read_text())

@@ -1,0 +1,148 @@
+"""Shortlist of the nearest reference points in squared euclidean distance, exploiting sparse fingerprints.
+
+With missing readings filled by a constant, ``a = rss − fill`` is 0 wherever an AP is not detected, and a
+scan detects ~20 of ~200 APs. Reference points (RPs) are sorted along a Morton curve of their positions and
+cut into blocks of :data:`RP_BLOCK`; a block's RPs detect few APs between them (~70 of 186 on the `large`
+preset), so ``−2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only. ``‖a_r‖²`` is
+precomputed; ``‖a_q‖²`` is a per-query constant and does not change the ranking. A few queries at a time
+(one-at-a-time localization) instead use one product over the queries' detected APs only.
+
+The ``c`` smallest entries of each query's row come from a two-level selection: the minimum of every group
+of :data:`GROUP` consecutive RPs, the ``c`` groups with the smallest minima (any of the ``c`` nearest RPs
+lies in one of them, ties aside), then the ``c`` smallest of those groups' entries. The float32 shortlist is
+meant to be re-ranked exactly by the caller. Measured against scikit-learn in bench/bench_map.py.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from rmbuild.localize.blas import one_blas_thread
+
+#: RPs per block of the blocked product (128: ~0.4 of the dense flops on the `large` preset, few calls).
+RP_BLOCK = 128
+#: RPs per group of the two-level selection (16: 1/16 of the entries reach the first argpartition).
+GROUP = 16
+#: queries up to this many at once use one product over their detected APs instead of the blocks.
+FEW_QUERIES = 8
+#: worker threads over chunks of queries; BLAS runs one thread inside each (the products are small, and a
+#: multi-threaded BLAS on small products was 3-8x slower on the shared 2-core machine).
+THREADS = min(2, os.cpu_count() or 1)
+#: float32 elements of the (RP, query) distance matrix per chunk of queries (8 MB).
+CHUNK_ELEMS = 1 << 21
+
+
+def morton_order(xy: np.ndarray, bits: int = 16) -> np.ndarray:
+    """Permutation sorting points along a Z-order (Morton) curve; non-finite positions go last."""
+    xy = np.asarray(xy, dtype=np.float64)
+    ok = np.isfinite(xy).all(axis=1)
+    if not ok.any():
+        return np.arange(len(xy))
+    lo = xy[ok].min(axis=0)
+    span = max(float(np.ptp(xy[ok], axis=0).max()), 1e-9)
+    g = np.zeros((len(xy), 2), dtype=np.uint64)
+    g[ok] = ((xy[ok] - lo) / span * (2**bits - 1)).astype(np.uint64)
+    code = np.zeros(len(xy), dtype=np.uint64)
+    for b in range(bits):
+        bit = np.uint64(b)
+        code |= ((g[:, 0] >> bit) & np.uint64(1)) << np.uint64(2 * b)
+        code |= ((g[:, 1] >> bit) & np.uint64(1)) << np.uint64(2 * b + 1)
+    code[~ok] = np.iinfo(np.uint64).max
+    return np.argsort(code, kind="stable")
+
+
+class SparseL2Shortlist:
+    """Candidates for the ``c`` nearest rows of ``a`` (n_rp, n_ap) in squared euclidean distance."""
+
+    def __init__(self, a: np.ndarray, xy: np.ndarray) -> None:
+        n_rp, n_ap = a.shape
+        self.n_rp, self.n_ap = n_rp, n_ap
+        self.perm = morton_order(xy)
+        self.n_pad = -(-n_rp // GROUP) * GROUP
+        ap = np.zeros((self.n_pad, n_ap), dtype=np.float32)
+        ap[:n_rp] = a[self.perm]
+        sq = np.full(self.n_pad, np.inf, dtype=np.float32)
+        sq[:n_rp] = (a[self.perm].astype(np.float64) ** 2).sum(axis=1)
+        self.sq = sq
+        self.wt = np.ascontiguousarray(-2.0 * ap.T)  # (n_ap, n_pad): the few-queries product
+        self.blocks: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+        for s in range(0, self.n_pad, RP_BLOCK):
+            e = min(s + RP_BLOCK, self.n_pad)
+            cols = np.flatnonzero((ap[s:e] != 0).any(axis=0))
+            self.blocks.append((s, e, cols, np.ascontiguousarray(-2.0 * ap[s:e][:, cols])))
+
+    def _distances(self, aq: np.ndarray) -> np.ndarray:
+        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding)."""
+        nq = len(aq)
+        if nq <= FEW_QUERIES:
+            cols = np.flatnonzero((aq != 0).any(axis=0))
+            dt = self.wt[cols].T @ aq[:, cols].T.astype(np.float32)
+        else:
+            aqt = np.ascontiguousarray(aq.T, dtype=np.float32)  # (n_ap, nq)
+            dt = np.empty((self.n_pad, nq), dtype=np.float32)
+            for s, e, cols, w in self.blocks:
+                if len(cols):
+                    np.matmul(w, aqt[cols], out=dt[s:e])
+                else:
+                    dt[s:e] = 0.0
+        dt += self.sq[:, None]
+        return dt
+
+    def candidates(self, aq: np.ndarray, c: int) -> np.ndarray:
+        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside; ``c <= n_rp``."""
+        nq = len(aq)
+        out = np.empty((nq, c), dtype=np.int64)
+        step = max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
+        starts = range(0, nq, step)
+
+        def run(s: int) -> None:
+            out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
+
+        if nq <= FEW_QUERIES:  # one small product: entering the BLAS limit would cost more than it saves
+            out[:] = self._select(self._distances(aq), c)
+            return out
+        with one_blas_thread():
+            if len(starts) > 1 and THREADS > 1:
+                with ThreadPoolExecutor(THREADS) as ex:
+                    list(ex.map(run, starts))
+            else:
+                for s in starts:
+                    run(s)
+        return out
+
+    def _select(self, dt: np.ndarray, c: int) -> np.ndarray:
+        """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq)."""
+        nq = dt.shape[1]
+        if c * GROUP >= self.n_pad:
+            rows = np.broadcast_to(np.arange(self.n_pad), (nq, self.n_pad))
+        else:
+            gmin = np.ascontiguousarray(dt.reshape(-1, GROUP, nq).min(axis=1).T)  # (nq, n_groups)
+            gs = smallest(gmin, c)
+            rows = (gs[:, :, None] * GROUP + np.arange(GROUP)).reshape(nq, -1)
+        vals = dt[rows, np.arange(nq)[:, None]]
+        return self.perm[np.take_along_axis(rows, smallest(vals, c), axis=1)]
+
+
+def smallest(x: np.ndarray, c: int) -> np.ndarray:
+    """(n, c) column indices of the ``c`` smallest entries of each row of ``x`` (n, m), in no order.
+
+    ``np.partition`` finds each row's c-th value several times faster than ``np.argpartition`` finds the
+    indices; the entries up to it are exactly ``c`` but on rows with ties there, which argpartition settles.
+    """
+    n, m = x.shape
+    if c >= m:
+        return np.broadcast_to(np.arange(m), (n, m)).copy()
+    kth = np.partition(x, c - 1, axis=1)[:, c - 1]
+    r, j = np.nonzero(x <= kth[:, None])
+    if len(r) == n * c:  # no row has more than c (and none can have fewer)
+        return j.reshape(n, c)
+    out = np.empty((n, c), dtype=np.int64)
+    cnt = np.bincount(r, minlength=n)
+    ok = cnt == c
+    out[ok] = j[np.repeat(ok, cnt)].reshape(-1, c)
+    tied = np.flatnonzero(~ok)
+    out[tied] = np.argpartition(x[tied], c - 1, axis=1)[:, :c]
+    return out
