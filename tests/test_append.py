@@ -55,7 +55,11 @@ def test_append_equals_ingesting_all_at_once(parts: dict[str, Path], capsys: pyt
     fa, fb = Workspace.open(base / "ws").read_fingerprints(), Workspace.open(base / "ws_all").read_fingerprints()
     assert np.array_equal(fa.node, fb.node) and list(fa.bssids) == list(fb.bssids)
     assert np.array_equal(fa.rss_dbm, fb.rss_dbm, equal_nan=True)
-    # the optimize run before the append is stale now: export-map refuses it until optimize runs again
+    # the optimize run before the append is stale now: view leaves it out and says why, export-map refuses
+    # it until optimize runs again
+    r = run_cli(capsys, "view", "-w", base / "ws", "--save", base / "v.rrd")
+    assert r.code == 0, r.err
+    assert "stale" in r.err and "optimize" in r.err
     r = run_cli(capsys, "export-map", "-w", base / "ws", "-q")
     assert r.code == 2 and "optimize" in r.err
     assert run_cli(capsys, "optimize", "-w", base / "ws", "-q", "--force").code == 0

@@ -13,13 +13,26 @@ from pathlib import Path
 
 import numpy as np
 
-from rmbuild.io.workspace import Workspace, walk_file_names
+from rmbuild.io.workspace import STAGE_COMMANDS, Workspace, walk_file_names
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.viz import Viewer, ViewTarget, open_viewer
 from rmbuild.viz.align import frame_to_fixes, frame_to_truth, plan_segments
 
 log = logging.getLogger(__name__)
+
+
+def _stale_stages(ws: Workspace, skipped: dict[str, str]) -> set[str]:
+    """The stages whose outputs were built from an earlier run of a stage they read (e.g. optimize before an
+    ``ingest --append``): not logged beside the current ones, with a warning and a reason in ``skipped``."""
+    out = set()
+    for s in ("optimize", "map", "evaluate"):
+        if ws.has(s) and (old := ws.stale_inputs(s)):
+            out.add(s)
+            skipped[s] = (f"stale: {STAGE_COMMANDS[s]} ran on an earlier {', '.join(old)}; re-run "
+                          f"`rmbuild {STAGE_COMMANDS[s]} --force`")
+            log.warning(f"{ws.root}: {skipped[s]}")
+    return out
 
 
 def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = None) -> dict:
@@ -54,7 +67,8 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
         logged.append("waypoints")
     times["ingest"] = time.perf_counter() - t
 
-    if ws.has("optimize"):
+    stale = _stale_stages(ws, skipped)
+    if ws.has("optimize") and "optimize" not in stale:
         t = step("optimize")
         opt = ws.read_table("optimize.poses")
         gauge = (ws.read_report("optimize") or {}).get("gauge")
@@ -78,10 +92,10 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
             viewer.log_residuals(ds.poses, opt, pairs)
         logged.append("optimize")
         times["optimize"] = time.perf_counter() - t
-    else:
+    elif "optimize" not in stale:
         skipped["optimize"] = "stage not run"
 
-    if ws.has("map") and ws.exists("map.cells"):
+    if ws.has("map") and ws.exists("map.cells") and "map" not in stale:
         t = step("map")
         sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
         grid = (sidecar or {}).get("grid") or {}
@@ -89,15 +103,15 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
                             origin_xy_m=grid.get("origin_xy_m"))
         logged.append("map")
         times["map"] = time.perf_counter() - t
-    else:
+    elif "map" not in stale:
         skipped["map"] = "stage not run"
 
-    if ws.has("evaluate") and ws.exists("evaluate.tracks"):
+    if ws.has("evaluate") and ws.exists("evaluate.tracks") and "evaluate" not in stale:
         t = step("evaluate")
         n = viewer.log_tracks(ws.read_table("evaluate.tracks"))
         (logged.append("evaluate") if n else skipped.__setitem__("evaluate", "no usable tracks"))
         times["evaluate"] = time.perf_counter() - t
-    else:
+    elif "evaluate" not in stale:
         skipped["evaluate"] = "stage not run"
     return {"logged": logged, "skipped": skipped, "time_s": {k: round(v, 4) for k, v in times.items()}}
 
