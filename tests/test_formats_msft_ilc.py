@@ -307,3 +307,14 @@ def test_overlong_line_and_huge_time_are_errors_naming_the_line(tmp_path):
     with pytest.raises(InputError, match="has 20 digits") as e:
         read([write(tmp_path, lines, "t20.txt")])
     assert e.value.where == f"{tmp_path / 't20.txt'}:{i + 1}"
+
+
+def test_traces_of_two_sites_are_noted(tmp_path):
+    text = FIXTURE.read_text()
+    (tmp_path / "a.txt").write_text(text)
+    (tmp_path / "b.txt").write_text(text.replace("SiteID:site0", "SiteID:site9"))
+    raw = MsftIlcReader().read([tmp_path / "a.txt", tmp_path / "b.txt"], IngestConfig())
+    note = [n for n in raw.notes if "sites" in n]
+    assert len(note) == 1 and "site0: 1" in note[0] and "site9: 1" in note[0]
+    raw = MsftIlcReader().read([tmp_path / "a.txt"], IngestConfig())
+    assert not [n for n in raw.notes if "sites" in n]

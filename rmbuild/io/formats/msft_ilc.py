@@ -133,6 +133,7 @@ class _Trace:
     skipped: Counter
     n_wifi_stale: int
     n_wifi_dup: int = 0
+    site: str = ""  # the header's SiteID (one building)
 
 
 #: per used type: field positions of the numeric values and of the text values
@@ -324,9 +325,12 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise InputError(f"not UTF-8 text (byte {e.start})", str(path)) from None
-    device = floor = ""
+    device = floor = site = ""
     for h in _HEADER_RE.findall(raw[:20000]):
         hs = h.decode("utf-8", "replace")
+        m = re.search(r"\tSiteID:([^\t]*)", hs)
+        if m:
+            site = m.group(1).strip()
         m = re.search(r"\tModel:([^\t]*)", hs)
         if m:
             device = m.group(1).strip()
@@ -380,7 +384,7 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
         "floor": pd.Series([floor] * len(wp.t_s), dtype=object),
     })
     return _Trace(wid, device, floor, acc, gyr, rot, wifi, w.line[idx], waypoints, wp.line, skipped, n_stale,
-                  n_dup)
+                  n_dup, site)
 
 
 def _floor_plans(files: list[Path]) -> dict[str, dict]:
@@ -448,8 +452,10 @@ class MsftIlcReader(Reader):
         wifi_lines, fix_lines = [], []
         skipped: Counter = Counter()
         n_stale = n_wifi = n_dup = 0
+        sites: Counter = Counter()
         for f in traces:
             tr = parse_trace(f, opts)
+            sites[tr.site] += 1
             if tr.walk_id in seen:
                 raise InputError(f"duplicate trace id {tr.walk_id!r} (also {seen[tr.walk_id]})", str(f))
             seen[tr.walk_id] = f
@@ -470,6 +476,10 @@ class MsftIlcReader(Reader):
             n_dup += tr.n_wifi_dup
             n_wifi += tr.n_wifi_stale + tr.n_wifi_dup + len(tr.wifi)
             self.file_done(f)
+        if len(set(sites) - {""}) > 1:
+            notes.append(f"the traces come from {len(set(sites) - {''})} sites (SiteID "
+                         + ", ".join(f"{k}: {n} trace(s)" for k, n in sites.most_common() if k)
+                         + "): floors of different buildings in one workspace; ingest one site at a time")
         if n_wifi:
             notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
                          f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
