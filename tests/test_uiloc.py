@@ -1,4 +1,4 @@
-"""UILoc pieces: RSS filter, least-squares multilateration and the fusion localizer, the self-building map."""
+"""UILoc pieces: least-squares multilateration and the fusion localizer, the self-building map."""
 
 from __future__ import annotations
 
@@ -6,32 +6,9 @@ import numpy as np
 import pytest
 
 from rmbuild.localize.base import Query, make_localizer
-from rmbuild.localize.rss_filter import filter_query, kalman_1d, tukey_window_mean
 from rmbuild.localize.uiloc import UilocLocalizer, ap_positions, fit_path_loss, multilaterate
 from rmbuild.radiomap.reference import ReferenceSet
 from rmbuild.radiomap.selfbuild import merge_fingerprints
-
-
-def test_tukey_drops_an_outlier_and_kalman_converges():
-    x = np.array([-60.0] * 9 + [-30.0])  # a spike at the newest sample: outside Q3 + 1.5 IQR (IQR = 0)
-    assert tukey_window_mean(x)[-1] == pytest.approx(-60.0)
-    x2 = np.c_[x, np.r_[np.nan, -70.0, np.nan, -72.0, -74.0, np.nan, -70.0, -70.0, -72.0, -70.0]]
-    out = tukey_window_mean(x2)
-    assert np.isnan(out[0, 1]) and out[3, 1] == pytest.approx(-71.0)  # mean of the readings so far
-    rng = np.random.default_rng(0)
-    z = -65.0 + rng.normal(0, 3.0, 400)
-    k = kalman_1d(z)
-    assert k[0] == z[0] and abs(k[-50:].mean() + 65.0) < 1.0 and k[-100:].std() < 0.5 * z[-100:].std()
-    k2 = kalman_1d(np.r_[-60.0, np.nan, -60.0])
-    assert np.isnan(k2[1]) and k2[2] == pytest.approx(-60.0)
-
-
-def test_filter_query_per_walk_in_time_order():
-    rss = np.array([[-50.0], [-80.0], [-50.0], [-80.0]], dtype=np.float32)
-    q = Query(rss, np.array(["a"], dtype=object), np.array([0.0, 0.0, 1.0, 1.0]),
-              np.array(["w1", "w2", "w1", "w2"], dtype=object), np.full(4, -1))
-    f = filter_query(q)
-    np.testing.assert_allclose(f.rss_dbm[:, 0], [-50, -80, -50, -80], atol=1e-4)  # walks never mixed
 
 
 def test_multilaterate_exact_ranges_recover_the_point():
