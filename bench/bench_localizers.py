@@ -33,7 +33,7 @@ DEVICE = (1.25, -6.0)
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 UJI = SHARED / "uji-longterm" / "db"
 #: every registered localizer but the Kalman-smoothed variants of nb and ssd (knn_kf and slac_kf stand for them)
-NAMES = ("knn", "wknn", "nb", "ssd", "ssr", "hist", "hist_dir", "hist@paper", "hist_dir@paper", "mll", "pfl",
+NAMES = ("knn", "wknn", "uiloc", "nb", "ssd", "ssr", "hist", "hist_dir", "hist@paper", "hist_dir@paper", "mll", "pfl",
          "slac", "smartloc", "smartloc_static", "knn_kf", "slac_kf", "offline_cal:knn", "offline_cal:mll",
          "offline_cal:pfl")
 #: localizers that need each test walk's steps ("offline_cal:<base>" is `offline_cal` running <base>, as

@@ -114,7 +114,8 @@ def write_summary(results: Path = RESULTS) -> Path:
              "one, which hold every figure and the machine. Timings are wall-clock on a 2-core machine shared "
              "with other jobs: compare ratios measured in one run (each benchmark says how it repeats them).", ""]
     lines += summary_lines(results)
-    lines += ["", "Localizer accuracy per test bed: `localizers.md`; real floors: `real_after.md` (the current code; `real.md` is the code before the back end was rebuilt).", ""]
+    lines += ["", "Localizer accuracy per test bed: `localizers.md`; real floors: `real_after.md` (the current code; "
+              "`real.md` is the code before the back end was rebuilt).", ""]
     p = results / "SUMMARY.md"
     p.write_text("\n".join(lines))
     return p

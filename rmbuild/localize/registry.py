@@ -11,6 +11,8 @@ from __future__ import annotations
 REGISTRY: dict[str, tuple[str, str]] = {
     "knn": ("rmbuild.localize.knn:KnnLocalizer", "FL / kNN: mean of the K RPs nearest in RSS space"),
     "wknn": ("rmbuild.localize.knn:WeightedKnnLocalizer", "distance-weighted kNN"),
+    "uiloc": ("rmbuild.localize.uiloc:UilocLocalizer",
+              "UILoc: kNN and least-squares multilateration fused by exp(-distance) weights"),
     "nb": ("rmbuild.localize.bayes:NaiveBayesLocalizer", "naive Bayes, Gaussian kernel per AP (SmartLocator)"),
     "ssd": ("rmbuild.localize.ssd:SsdLocalizer", "signal-strength differences between APs (offset-free)"),
     "ssr": ("rmbuild.localize.ssd:SsrLocalizer", "signal-strength ratios between APs (gain-free)"),
