@@ -176,6 +176,17 @@ def test_cli_on_a_building(building: dict[str, Path], tmp_path: Path, capsys: py
     assert r.code == 2 and "--floor" in r.err
 
 
+def test_uji_csv_of_a_floor_carries_its_level(building: dict[str, Path]) -> None:
+    from rmbuild.io.workspace import floor_levels
+
+    levels = floor_levels(building["both"])
+    assert levels["F2"] != levels["F1"] and levels["F2"] is not None
+    for f in ("F1", "F2"):
+        csv = pd.read_csv(building["both"] / "floors" / f / "map" / "radiomap_uji.csv")
+        assert (csv["FLOOR"] == levels[f]).all()
+    assert (pd.read_csv(building["F2"] / "map" / "radiomap_uji.csv")["FLOOR"] == 0).all()
+
+
 def test_localize_on_a_building_takes_one_floor(building: dict[str, Path], tmp_path: Path,
                                                capsys: pytest.CaptureFixture) -> None:
     ws, new = building["both"], building["F2"].parent / "F2"

@@ -529,6 +529,17 @@ def floor_levels(root: str | Path) -> dict[str, int | None]:
     return {f["name"]: f.get("level") if isinstance(f.get("level"), int) else None for f in m.get("floors", [])}
 
 
+def level_of_floor(root: str | Path) -> int | None:
+    """The level of the floor whose workspace is ``root`` (a building's ``floors/<NAME>``); None for a
+    single-floor workspace or an unknown level."""
+    root = Path(root).resolve()
+    if root.parent.name != FLOORS_DIR:
+        return None
+    floors = building_floors(root.parent.parent) or {}
+    levels = floor_levels(root.parent.parent)
+    return next((levels.get(n) for n, p in floors.items() if p.resolve() == root), None)
+
+
 def building_report_path(root: str | Path, command: str) -> Path:
     """Where a stage's building-level report goes (``building/<command>.json``)."""
     return Path(root) / BUILDING_DIR / f"{command}.json"

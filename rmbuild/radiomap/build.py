@@ -121,12 +121,12 @@ class RadioMap:
         width = max(3, len(str(len(self.bssids))))
         return [f"WAP{i + 1:0{width}d}" for i in range(len(self.bssids))]
 
-    def wide_table(self, layout: str = "uji") -> pd.DataFrame:
+    def wide_table(self, layout: str = "uji", floor: int = 0) -> pd.DataFrame:
         """One row per cell, one column per AP, +100 = not detected (UJIIndoorLoc's convention).
 
         ``layout="uji"``: exactly UJIIndoorLoc's columns — ``WAP001..WAPnnn`` (the sidecar's ``ap_columns``
         maps them to BSSIDs; RSSI rounded to integer dBm like the original), then LONGITUDE = x and
-        LATITUDE = y (metres in the map frame; UJIIndoorLoc's are projected metres too), FLOOR = 0,
+        LATITUDE = y (metres in the map frame; UJIIndoorLoc's are projected metres too), FLOOR = ``floor``,
         BUILDINGID = 0, SPACEID = cell id, RELATIVEPOSITION = 0, USERID = 0, PHONEID = 0, TIMESTAMP = 0.
         ``layout="xy"``: BSSIDs as column names, RSSI unrounded (0.01 dB), then ``x_m``, ``y_m``.
         """
@@ -137,7 +137,7 @@ class RadioMap:
             n = len(df)
             tail = {
                 "LONGITUDE": self.cells["x_m"].to_numpy(), "LATITUDE": self.cells["y_m"].to_numpy(),
-                "FLOOR": np.zeros(n, np.int64), "BUILDINGID": np.zeros(n, np.int64),
+                "FLOOR": np.full(n, floor, np.int64), "BUILDINGID": np.zeros(n, np.int64),
                 "SPACEID": self.cells["cell"].to_numpy(), "RELATIVEPOSITION": np.zeros(n, np.int64),
                 "USERID": np.zeros(n, np.int64), "PHONEID": np.zeros(n, np.int64),
                 "TIMESTAMP": np.zeros(n, np.int64),

@@ -10,7 +10,7 @@ import pandas as pd
 from rmbuild.config import MapConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.io.anchors import check_anchors, read_anchors
-from rmbuild.io.workspace import Workspace
+from rmbuild.io.workspace import Workspace, level_of_floor
 from rmbuild.radiomap.build import CELL_COLUMNS
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -76,7 +76,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         w.table("map.cells", long)
         w.table("map.cell_table", rm.cells[list(CELL_COLUMNS)])
         w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
-        rm.wide_table("uji").to_csv(w.path("map.wide_csv"), index=False)
+        rm.wide_table("uji", floor=level_of_floor(ws.root) or 0).to_csv(w.path("map.wide_csv"), index=False)
         pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
             w.path("map.wide_csv_aps"), index=False)  # WAPnnn -> BSSID, for tools that read the CSV alone
         if rm.histograms is not None:
