@@ -1,0 +1,96 @@
+"""One floor's work in `rmbuild build`: optimize → export-map → evaluate (when it can be scored) → report,
+on the floor's own workspace, as one task (:mod:`rmbuild.stages.dask_run`).
+
+The task takes plain values (the floor's name and workspace path, each stage's config as TOML text) and
+returns a plain dict, so that it runs alike in this process and in a Dask worker on another machine; the
+stages write the floor's outputs through the workspace's atomic writers, as when run one by one.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import resource
+import socket
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from rmbuild.config import load_stage_config_text
+from rmbuild.io.workspace import Workspace
+
+#: the stage config sections a floor task needs (TOML text of each, as written next to outputs)
+TASK_SECTIONS = ("optimize", "map", "evaluate")
+
+
+def run_floor(name: str, path: str, configs: dict[str, str], force: bool) -> dict:
+    """Run the floor's stages; returns {"floor", "ok", "stages": {stage: summary}, "evaluate_skipped",
+    "warnings", "time_s", "peak_rss_mb", "worker"}. Raises what a stage raises (the caller reports it)."""
+    from rmbuild.stages import evaluate, export_map, optimize, report
+
+    t0 = time.perf_counter()
+    cfg = {s: load_stage_config_text(s, configs[s], f"[{s}] config of the build") for s in TASK_SECTIONS}
+    stages: dict[str, dict] = {}
+    with captured_warnings() as warnings:
+        stages["optimize"] = _optimize_summary(optimize.run(path, cfg["optimize"], force=force))
+        stages["export-map"] = _map_summary(export_map.run(path, cfg["map"], force=force))
+        skip = why_no_evaluate(Workspace.open(path).read_report("ingest") or {})
+        if skip is None:
+            rep, _ = evaluate.run(path, cfg["evaluate"], cfg["map"], force=force)
+            stages["evaluate"] = _evaluate_summary(rep)
+        r = report.run(path, force=force)
+        stages["report"] = {"path": r["path"], "figures": r["figures"], "missing": r["missing"],
+                            "time_s": r["time_s"]}
+    return {"floor": name, "ok": True, "stages": stages, "evaluate_skipped": skip, "warnings": warnings,
+            "time_s": round(time.perf_counter() - t0, 3),
+            # the process' peak resident memory (a worker that ran several floors: the largest so far)
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+            "worker": f"{socket.gethostname()}:{os.getpid()}"}
+
+
+def why_no_evaluate(ingest_report: dict) -> str | None:
+    """Why a floor is not evaluated (None: it is): no ground truth to score against, or too few walks to
+    hold one out."""
+    if not ingest_report.get("has_truth_poses") and not ingest_report.get("fixes"):
+        return "no ground truth (neither true paths nor position fixes)"
+    if int(ingest_report.get("walks") or 0) < 2:
+        return "a single walk: none to hold out for testing"
+    return None
+
+
+@contextmanager
+def captured_warnings() -> Iterator[list[str]]:
+    """The warnings rmbuild logs in the block, collected (not printed): the caller shows them with the
+    floor's name, alike whether the floor ran here or in a worker process."""
+    logger = logging.getLogger("rmbuild")
+    out: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            out.append(record.getMessage())
+
+    saved, propagate = logger.handlers[:], logger.propagate
+    logger.handlers[:] = [Collect(logging.WARNING)]
+    logger.propagate = False
+    try:
+        yield out
+    finally:
+        logger.handlers[:] = saved
+        logger.propagate = propagate
+
+
+def _optimize_summary(r: dict) -> dict:
+    opt = r.get("optimized") or {}
+    return {"walks": r["walks"], "poses": r["poses"], "poses_solved": r.get("poses_solved", r["poses"]),
+            "gauge": r.get("gauge"), "ate_rmse_m": (opt.get("ate_m") or {}).get("rmse"),
+            "time_s": (r.get("time_s") or {}).get("stage_total")}
+
+
+def _map_summary(r: dict) -> dict:
+    return {"cells": r["cells"], "aps": r["aps"], "frame": r["frame"], "time_s": r["time_s"]["total"]}
+
+
+def _evaluate_summary(r: dict) -> dict:
+    """The mean error of each map and localizer (m), and the scans scored."""
+    means = {m: {loc: s.get("mean") for loc, s in d.items()} for m, d in (r.get("maps") or {}).items()}
+    return {"mean_error_m": means, "n_queries": r.get("n_queries"), "time_s": r["time_s"]["total"]}
