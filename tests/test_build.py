@@ -129,3 +129,26 @@ def test_scheduler_values() -> None:
             parse_scheduler(bad)
     with pytest.raises(ConfigError, match="scheduler"):
         load_stage_config("build", overrides={"scheduler": "local:x"})
+
+
+def _dies_on(name: str) -> dict:
+    """A task that kills its own worker process for item "dead" (as the kernel's OOM killer would)."""
+    import os
+
+    if name == "dead":
+        os._exit(9)
+    return {"ok": True, "pid": os.getpid()}
+
+
+def test_a_killed_worker_fails_its_task_only() -> None:
+    import dask
+
+    from rmbuild.stages.dask_run import run_tasks
+
+    seen: list[str] = []
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):  # no retry on a fresh worker
+        out = run_tasks(_dies_on, {"alive": ("alive",), "dead": ("dead",)}, parse_scheduler("local:2"),
+                        on_done=lambda name, r: seen.append(name))
+    assert list(out) == ["alive", "dead"] and sorted(seen) == ["alive", "dead"]
+    assert out["alive"]["ok"] and not out["dead"]["ok"]
+    assert "KilledWorker" in out["dead"]["error"] and "\n" not in out["dead"]["error"]
