@@ -9,7 +9,6 @@ workspace's atomic writers. A task that raises, or whose worker dies (killed, ou
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -17,8 +16,6 @@ from typing import Any
 
 from rmbuild.config.build import Scheduler
 from rmbuild.errors import InputError, one_line
-
-log = logging.getLogger(__name__)
 
 #: seconds to wait for a cluster's scheduler to answer before giving up
 CONNECT_TIMEOUT_S = 30
@@ -30,17 +27,37 @@ def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Sched
     """``fn(*items[name])`` for every item; returns name -> result (in the order of ``items``).
     ``on_done(name, result)`` as each one finishes (in the order they finish); ``on_cluster(text)`` once a
     cluster is up (its workers and dashboard)."""
-    done = on_done or (lambda name, r: None)
-    if scheduler.kind == "serial" or len(items) <= 1:
-        out = {}
-        for name, args in items.items():
-            out[name] = call_task(fn, *args)
-            done(name, out[name])
-        return out
-    with _client(scheduler, len(items), worker_memory_gb) as client:
+    with executor(scheduler, len(items), worker_memory_gb, on_cluster) as run:
+        return run(fn, items, on_done)
+
+
+#: runs ``fn`` over ``items`` (name -> args) and returns name -> result; ``on_done(name, result)`` each
+Runner = Callable[[Callable[..., dict], dict[str, tuple], Callable[[str, dict], None] | None], dict[str, dict]]
+
+
+@contextmanager
+def executor(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float = 0.0,
+             on_cluster: Callable[[str], None] | None = None) -> Iterator[Runner]:
+    """A runner of task rounds on one scheduler (one cluster for several rounds): in this process for
+    ``serial`` or a single item; else on Dask. ``n_items``: the most items a round has (None: unknown),
+    which caps a ``local`` cluster's default size."""
+    if scheduler.kind == "serial" or (n_items is not None and n_items <= 1):
+        yield _serial
+        return
+    with _client(scheduler, n_items, worker_memory_gb) as client:
         if on_cluster is not None:
             on_cluster(cluster_text(client))
-        return _submit_all(client, fn, items, done)
+        yield lambda fn, items, on_done: _submit_all(client, fn, items, on_done)
+
+
+def _serial(fn: Callable[..., dict], items: dict[str, tuple],
+            on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
+    out = {}
+    for name, args in items.items():
+        out[name] = call_task(fn, *args)
+        if on_done is not None:
+            on_done(name, out[name])
+    return out
 
 
 def call_task(fn: Callable[..., dict], *args: Any) -> dict:
@@ -59,7 +76,7 @@ def failed(e: BaseException) -> dict:
 
 
 def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
-                done: Callable[[str, dict], None]) -> dict[str, dict]:
+                on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
     from distributed import as_completed
 
     futures = {client.submit(call_task, fn, *args, key=f"rmbuild-{name}-{os.urandom(4).hex()}", pure=False): name
@@ -71,12 +88,13 @@ def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
             out[name] = fut.result()
         except Exception as e:  # the worker died (KilledWorker) or the result could not come back
             out[name] = failed(e)
-        done(name, out[name])
+        if on_done is not None:
+            on_done(name, out[name])
     return {name: out[name] for name in items}
 
 
 @contextmanager
-def _client(scheduler: Scheduler, n_items: int, worker_memory_gb: float) -> Iterator[Any]:
+def _client(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float) -> Iterator[Any]:
     """A Dask client: of a new LocalCluster (closed on exit) or connected to ``scheduler.address``."""
     from distributed import Client, LocalCluster
 
@@ -88,7 +106,8 @@ def _client(scheduler: Scheduler, n_items: int, worker_memory_gb: float) -> Iter
         with client:
             yield client
         return
-    n = scheduler.workers or max(1, min(n_items, os.cpu_count() or 1))
+    cores = os.cpu_count() or 1
+    n = scheduler.workers or max(1, min(n_items or cores, cores))
     memory: Any = int(worker_memory_gb * 1e9) if worker_memory_gb > 0 else "auto"
     with (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory,
                        dashboard_address=":0" if _has_dashboard() else None) as cluster,

@@ -94,3 +94,18 @@ def _evaluate_summary(r: dict) -> dict:
     """The mean error of each map and localizer (m), and the scans scored."""
     means = {m: {loc: s.get("mean") for loc, s in d.items()} for m, d in (r.get("maps") or {}).items()}
     return {"mean_error_m": means, "n_queries": r.get("n_queries"), "time_s": r["time_s"]["total"]}
+
+
+def ingest_venue(name: str, inputs: list[str], workspace: str, configs: dict[str, str], fmt: str | None,
+                 force: bool, floorplan: str | None) -> dict:
+    """`rmbuild ingest` of one venue (a task of `build --venues`); returns {"venue", "ok", "ingest" (the
+    ingest report), "warnings", "time_s"}."""
+    from rmbuild.stages import ingest
+
+    t0 = time.perf_counter()
+    cfg = {s: load_stage_config_text(s, configs[s], f"[{s}] config of venue {name}") for s in ("ingest", "pdr")}
+    with captured_warnings() as warnings:
+        report = ingest.run(list(inputs), workspace, cfg["ingest"], fmt=fmt, force=force, pdr_cfg=cfg["pdr"],
+                            floorplan=floorplan)
+    return {"venue": name, "ok": True, "ingest": report, "warnings": warnings,
+            "time_s": round(time.perf_counter() - t0, 3)}
