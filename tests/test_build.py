@@ -152,3 +152,52 @@ def test_a_killed_worker_fails_its_task_only() -> None:
     assert list(out) == ["alive", "dead"] and sorted(seen) == ["alive", "dead"]
     assert out["alive"]["ok"] and not out["dead"]["ok"]
     assert "KilledWorker" in out["dead"]["error"] and "\n" not in out["dead"]["error"]
+
+
+def _venues_file(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "venues.toml"
+    p.write_text(text)
+    return p
+
+
+def test_venues_a_failed_venue_does_not_stop_the_others(tmp_path: Path, capsys) -> None:
+    from conftest import make_input_tables, write_tables
+
+    write_tables(make_input_tables(n_walks=3), tmp_path / "good")
+    bad = make_input_tables(n_walks=3)
+    bad["wifi"].loc[5, "rssi_dbm"] = 40.0  # outside the valid RSSI range: ingest rejects the venue
+    write_tables(bad, tmp_path / "bad")
+    venues = _venues_file(tmp_path, '[[venue]]\nname = "good"\ninputs = ["good"]\n\n'
+                                    '[[venue]]\nname = "bad"\ninputs = "bad"\nformat = "rmbuild"\n')
+    out = tmp_path / "out"
+    res = run_cli(capsys, "build", "--venues", venues, "-o", out, "--scheduler", "serial")
+    assert res.code == 2, res.err
+    assert "venue bad: FAILED" in res.out and "rssi" in res.out.lower()
+    assert "1 failed: bad" in res.err
+    # one fix per walk: too little ground truth to score the map, which stands unscored
+    assert "not evaluated: evaluate:" in res.out
+    assert (out / "good" / "report.html").is_file() and Workspace.open(out / "good").read_report("map")
+    assert not (out / "bad" / "manifest.json").exists()
+    before = (out / "good" / "manifest.json").read_text()
+    res = run_cli(capsys, "build", "--venues", venues, "-o", out, "--scheduler", "serial")
+    assert res.code == 2 and "--force" in res.err  # an existing venue workspace is kept without --force
+    assert (out / "good" / "manifest.json").read_text() == before
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\nanchors = "x.csv"\n', "venues.toml:1: venue 1: unknown key 'anchors'"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\n\n[[venue]]\nname = "a"\ninputs = ["in"]\n', "given twice"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\n\n[[venue]]\nname = "b"\ninputs = ["nope"]\n',
+     "venues.toml:5: venue 'b': inputs:"),
+    ('[[venue]]\nname = "../up"\ninputs = ["in"]\n', "name must be a directory name"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\nformat = "xls"\n', "format must be one of"),
+    ("[build]\nscheduler = 'serial'\n", "holds [[venue]] tables only"),
+])
+def test_venues_file_errors(tmp_path: Path, text: str, problem: str) -> None:
+    from rmbuild.io.formats import reader_names
+    from rmbuild.io.venues import read_venues
+
+    (tmp_path / "in").mkdir()
+    with pytest.raises(ConfigError) as e:
+        read_venues(_venues_file(tmp_path, text), reader_names())
+    assert problem in str(e.value)

@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from rmbuild.config import load_stage_config_text
+from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace
 
 #: the stage config sections a floor task needs (TOML text of each, as written next to outputs)
@@ -36,8 +37,12 @@ def run_floor(name: str, path: str, configs: dict[str, str], force: bool) -> dic
         stages["export-map"] = _map_summary(export_map.run(path, cfg["map"], force=force))
         skip = why_no_evaluate(Workspace.open(path).read_report("ingest") or {})
         if skip is None:
-            rep, _ = evaluate.run(path, cfg["evaluate"], cfg["map"], force=force)
-            stages["evaluate"] = _evaluate_summary(rep)
+            try:
+                rep, _ = evaluate.run(path, cfg["evaluate"], cfg["map"], force=force)
+                stages["evaluate"] = _evaluate_summary(rep)
+            except InputError as e:  # too little ground truth to score: the map stands, unscored
+                skip = f"evaluate: {e}"
+                logging.getLogger(__name__).warning(f"not evaluated: {e}")
         r = report.run(path, force=force)
         stages["report"] = {"path": r["path"], "figures": r["figures"], "missing": r["missing"],
                             "time_s": r["time_s"]}
