@@ -86,13 +86,13 @@ def _summary(r: dict, workspace: str, indent: str = "") -> None:
 
 
 def _venues_summary(r: dict, out_dir: str) -> None:
-    for name, err in r["failed_ingest"].items():
+    for name, err in r["failed_venues"].items():
         click.echo(f"venue {name}: FAILED: {err}")
     for name, v in r["venues"].items():
         click.echo(f"venue {name}:")
         _summary(v, f"{out_dir}/{name}", indent="  ")
     t = r["time_s"]
-    click.echo(f"{len(r['venues'])} of {len(r['venues']) + len(r['failed_ingest'])} venues built in "
+    click.echo(f"{len(r['venues'])} of {len(r['venues']) + len(r['failed_venues'])} venues built in "
                f"{t['total']:.1f} s (ingest round {t['ingest']:.1f} s, scheduler {r['scheduler']}) -> {out_dir}")
 
 

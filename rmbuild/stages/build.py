@@ -111,27 +111,34 @@ def run_venues(venues: list[Venue], out_dir: str | Path, cfgs: dict[str, Any], f
         for n in ok:
             for w in ingested[n]["warnings"]:
                 log.warning(f"venue {n}: {w}")
-        venues_out = _venue_floors(runner, {n: wss[n] for n in ok}, vcfgs, force, progress)
-    failed = {n: r["error"] for n, r in ingested.items() if not r.get("ok")}
+        venues_out, not_run = _venue_floors(runner, {n: wss[n] for n in ok}, vcfgs, force, progress)
+    failed_venues = {n: r["error"] for n, r in ingested.items() if not r.get("ok")} | not_run
+    failed = dict(failed_venues)
     for n, rep in venues_out.items():
         rep["ingest"] = ingested[n]["ingest"]
         failed.update({f"{n}/{f}": e for f, e in rep["failed"].items()})
     return {"stage": "build", "scheduler": cfgs["build"].scheduler, "venues": venues_out,
-            "failed_ingest": {n: ingested[n]["error"] for n in ingested if n not in venues_out}, "failed": failed,
+            "failed_venues": failed_venues, "failed": failed,
             "time_s": {"ingest": round(t_ingest, 3), "total": round(time.perf_counter() - t0, 3)}}
 
 
 def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[str, Any]], force: bool,
-                  progress: Progress) -> dict[str, dict]:
+                  progress: Progress) -> tuple[dict[str, dict], dict[str, str]]:
     """The floors of every ingested venue as one round of tasks (under each building's lock), then each
-    venue's building reports; venue name -> its build report."""
+    venue's building reports: (venue name -> its build report, venue name -> why it did not run)."""
+    not_run: dict[str, str] = {}
     with ExitStack() as locks:
         items: dict[str, tuple] = {}
         indexes: dict[str, Path | None] = {}
-        for n, ws in wss.items():
-            vitems, indexes[n] = _floor_items(ws, vcfgs[n], force)
-            if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's)
-                locks.enter_context(workspace_lock(ws, "build"))
+        for n, ws in list(wss.items()):
+            try:
+                vitems, indexes[n] = _floor_items(ws, vcfgs[n], force)
+                if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's)
+                    locks.enter_context(workspace_lock(ws, "build"))
+            except RmbuildError as e:  # taken by another command since its ingest: this venue only
+                not_run[n] = one_line(str(e))
+                del wss[n]
+                continue
             items.update({f"{n}/{f}": args for f, args in vitems.items()})
         t0 = time.perf_counter()
         results = _run_round(runner, run_floor, items, progress, "floors", "floors")
@@ -143,7 +150,7 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
             out[n]["time_s"] = {"floors_round": round(t_tasks, 3)}
             if out[n]["building"]:
                 write_json_atomic(building_report_path(ws, "build"), out[n])
-    return out
+    return out, not_run
 
 
 def _floor_items(workspace: str | Path, cfgs: dict[str, Any], force: bool) -> tuple[dict[str, tuple], Path | None]:
