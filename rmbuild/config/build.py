@@ -44,7 +44,7 @@ class BuildConfig:
     # where the floors run (each floor's optimize, export-map, evaluate, report is one task): "serial" (in
     # this process, one after the other); "local" or "local:N" (a Dask cluster of N worker processes on this
     # machine; N default: one per core, at most one per floor); "tcp://HOST:PORT" (a running Dask scheduler,
-    # `dask scheduler` / `dask worker`). A single-floor workspace always runs in this process.
+    # `dask scheduler` / `dask worker`). A single-floor input (without --venues) runs in this process.
     scheduler: str = "local"
     # GB; memory limit of each local worker process (Dask restarts a worker above it and the floor fails);
     # 0: the machine's memory shared equally by the workers. Cluster workers set theirs (`dask worker

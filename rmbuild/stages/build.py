@@ -56,12 +56,16 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
     from rmbuild.stages import ingest
 
     t0 = time.perf_counter()
-    parse_scheduler(cfgs["build"].scheduler)
+    sched = parse_scheduler(cfgs["build"].scheduler)
     Path(workspace).resolve().parent.mkdir(parents=True, exist_ok=True)  # the lock lives beside the workspace
-    with workspace_lock(workspace, "build"):
+    with ExitStack() as stack:
+        stack.enter_context(workspace_lock(workspace, "build"))
+        # a cluster given by its address is reached first: unreachable, nothing is written
+        runner = stack.enter_context(executor(sched, None, cfgs["build"].worker_memory_gb, on_cluster)) \
+            if sched.kind == "address" else None
         summary = ingest.run(inputs, workspace, cfgs["ingest"], fmt=fmt, force=force, progress=progress,
                              pdr_cfg=cfgs["pdr"], floorplan=floorplan)
-        out = run_floors_as_tasks(workspace, cfgs, force, progress, on_cluster)
+        out = run_floors_as_tasks(workspace, cfgs, force, progress, on_cluster, runner)
     out["ingest"] = summary
     out["time_s"]["ingest"] = _seconds((summary.get("building") or summary).get("time_s"))
     out["time_s"]["total"] = round(time.perf_counter() - t0, 3)
@@ -71,16 +75,18 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
 
 
 def run_floors_as_tasks(workspace: str | Path, cfgs: dict[str, Any], force: bool = False,
-                        progress: Progress | None = None, on_cluster: Any = None) -> dict:
-    """Every floor of an ingested workspace (a single-floor workspace: itself) as one task, then the
-    building's reports. Returns {"stage": "build", "scheduler", "floors": {name: task result},
-    "failed": {name: error}, "building": bool, "time_s"}."""
+                        progress: Progress | None = None, on_cluster: Any = None, runner: Runner | None = None) -> dict:
+    """Every floor of an ingested workspace (a single-floor workspace: itself) as one task (on ``runner``,
+    else on the configured scheduler), then the building's reports. Returns {"stage": "build", "scheduler",
+    "floors": {name: task result}, "failed": {name: error}, "building": bool, "time_s"}."""
     progress = ensure_progress(progress)
     sched = parse_scheduler(cfgs["build"].scheduler)
     items, index = _floor_items(workspace, cfgs, force)
     t0 = time.perf_counter()
-    with workspace_lock(workspace, "build"), \
-            executor(sched, len(items), cfgs["build"].worker_memory_gb, on_cluster) as runner:
+    with ExitStack() as stack:
+        stack.enter_context(workspace_lock(workspace, "build"))
+        if runner is None or len(items) <= 1:  # one floor (a single-floor workspace): in this process
+            runner = stack.enter_context(executor(sched, len(items), cfgs["build"].worker_memory_gb, on_cluster))
         results = _run_round(runner, run_floor, items, progress, f"floors ({cfgs['build'].scheduler})", "floors")
         t_tasks = time.perf_counter() - t0
         out = _finish(workspace, results, cfgs, index, progress)
