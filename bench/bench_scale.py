@@ -32,14 +32,17 @@ def run_build(src: Path, ws: Path, scheduler: str) -> dict:
     """One `rmbuild build` through the CLI; its wall time and the build report it wrote."""
     cmd = [sys.executable, "-m", "rmbuild", "build", str(src), "-w", str(ws), "--format", "msft-ilc",
            "--scheduler", scheduler, "--force", "-q"]
+    load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "MPLBACKEND": "Agg"})
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         return {"error": proc.stderr.strip()[-500:], "wall_s": round(wall, 2)}
     rep = json.loads((ws / "building" / "build.json").read_text())
-    return {"wall_s": round(wall, 2), "time_s": rep["time_s"],
-            "floors": {n: {"time_s": f["time_s"], "peak_rss_mb": f["peak_rss_mb"], "worker": f["worker"]}
+    # the machine's 1-minute load average before and after: other processes slow a run down
+    return {"wall_s": round(wall, 2), "time_s": rep["time_s"], "load_average": [load0, os.getloadavg()[0]],
+            "floors": {n: {"time_s": f["time_s"], "peak_rss_mb": f["peak_rss_mb"], "worker": f["worker"],
+                           "stages_s": {k: v.get("time_s") for k, v in f["stages"].items()}}
                        for n, f in rep["floors"].items()}}
 
 

@@ -201,3 +201,17 @@ def test_venues_file_errors(tmp_path: Path, text: str, problem: str) -> None:
     with pytest.raises(ConfigError) as e:
         read_venues(_venues_file(tmp_path, text), reader_names())
     assert problem in str(e.value)
+
+
+def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
+    import logging
+
+    from rmbuild.stages.floor_task import captured_warnings
+
+    log = logging.getLogger("rmbuild.stages.optimize")
+    with caplog.at_level(logging.INFO, logger="rmbuild"), captured_warnings() as warnings:
+        log.warning("plan fit doubtful")
+        log.info("phase done")
+    log.warning("after")
+    assert warnings == ["plan fit doubtful"]
+    assert [r.getMessage() for r in caplog.records] == ["phase done", "after"]

@@ -65,22 +65,30 @@ def why_no_evaluate(ingest_report: dict) -> str | None:
 
 @contextmanager
 def captured_warnings() -> Iterator[list[str]]:
-    """The warnings rmbuild logs in the block, collected (not printed): the caller shows them with the
-    floor's name, alike whether the floor ran here or in a worker process."""
+    """The warnings rmbuild logs in the block, collected instead of shown: the caller shows them with the
+    floor's name, alike whether the floor ran here or in a worker process (lesser records go on to where
+    they would have gone)."""
     logger = logging.getLogger("rmbuild")
     out: list[str] = []
+    shown, propagate = logger.handlers[:], logger.propagate
 
-    class Collect(logging.Handler):
+    class Route(logging.Handler):
         def emit(self, record: logging.LogRecord) -> None:
-            out.append(record.getMessage())
+            if record.levelno >= logging.WARNING:
+                out.append(record.getMessage())
+                return
+            for h in shown:
+                if record.levelno >= h.level:
+                    h.handle(record)
+            if propagate:
+                logging.getLogger().handle(record)
 
-    saved, propagate = logger.handlers[:], logger.propagate
-    logger.handlers[:] = [Collect(logging.WARNING)]
+    logger.handlers[:] = [Route()]
     logger.propagate = False
     try:
         yield out
     finally:
-        logger.handlers[:] = saved
+        logger.handlers[:] = shown
         logger.propagate = propagate
 
 
