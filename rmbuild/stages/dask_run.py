@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from rmbuild.config.build import Scheduler
-from rmbuild.errors import InputError, one_line
+from rmbuild.errors import InputError, RmbuildError, one_line
 
 #: seconds to wait for a cluster's scheduler to answer before giving up
 CONNECT_TIMEOUT_S = 30
@@ -31,7 +31,7 @@ def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Sched
         return run(fn, items, on_done)
 
 
-#: runs ``fn`` over ``items`` (name -> args) and returns name -> result; ``on_done(name, result)`` each
+#: runs ``fn`` over ``items`` (name -> args), returns name -> result, calls ``on_done(name, result)`` as each ends
 Runner = Callable[[Callable[..., dict], dict[str, tuple], Callable[[str, dict], None] | None], dict[str, dict]]
 
 
@@ -69,8 +69,7 @@ def call_task(fn: Callable[..., dict], *args: Any) -> dict:
 
 
 def failed(e: BaseException) -> dict:
-    from rmbuild.errors import RmbuildError
-
+    """A failed result: the error's one-line message (an unexpected one's with its type)."""
     text = str(e) if isinstance(e, RmbuildError) else f"{type(e).__name__}: {e}"
     return {"ok": False, "error": one_line(text)}
 
