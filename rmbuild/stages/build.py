@@ -19,7 +19,7 @@ from typing import Any
 from rmbuild.config import load_stage_config, to_toml
 from rmbuild.config.build import parse_scheduler
 from rmbuild.errors import RmbuildError, one_line
-from rmbuild.io.atomic import write_json_atomic, write_text_atomic
+from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.lock import workspace_lock
 from rmbuild.io.venues import Venue
 from rmbuild.io.workspace import (
@@ -29,17 +29,20 @@ from rmbuild.io.workspace import (
     check_output_file,
     check_replaceable,
 )
-from rmbuild.stages.building import building_page, building_report
 from rmbuild.stages.common import Progress, ensure_progress
 from rmbuild.stages.dask_run import Runner, executor
-from rmbuild.stages.floor_task import TASK_SECTIONS, ingest_venue, run_floor
+from rmbuild.stages.floor_task import (
+    TASK_SECTIONS,
+    building_reports_task,
+    ingest_venue,
+    run_floor,
+    write_building_reports,
+)
 
 log = logging.getLogger(__name__)
 
 #: the config sections `build` uses (one table each in a config file)
 SECTIONS = ("ingest", "pdr", *TASK_SECTIONS, "build")
-#: building report per floor-task stage: (command, stage whose floor reports it gathers)
-BUILDING_REPORTS = (("optimize", "optimize"), ("export-map", "map"), ("evaluate", "evaluate"))
 
 
 class FloorsFailedError(RmbuildError):
@@ -149,13 +152,22 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
         t0 = time.perf_counter()
         results = _run_round(runner, run_floor, items, progress, "floors", "floors")
         t_tasks = time.perf_counter() - t0
-        out = {}
+        out: dict[str, dict] = {}
+        reports: dict[str, tuple] = {}
         for n, ws in wss.items():
             mine = {k.split("/", 1)[1]: r for k, r in results.items() if k.split("/", 1)[0] == n}
-            out[n] = _finish(ws, mine, vcfgs[n], indexes[n], progress, prefix=f"venue {n}: ")
+            out[n] = _finish(ws, mine, vcfgs[n], None, progress, prefix=f"venue {n}: ")
+            out[n]["building"] = indexes[n] is not None
             out[n]["time_s"] = {"floors_round": round(t_tasks, 3)}
-            if out[n]["building"]:
-                write_json_atomic(building_report_path(ws, "build"), out[n])
+            if indexes[n] is not None:  # the buildings' reports: one task each, under the client's locks
+                reports[n] = (str(ws), mine, to_toml(vcfgs[n]["evaluate"], "evaluate"), str(indexes[n]))
+        done = _run_round(runner, building_reports_task, reports, progress, "building reports", "venues")
+        for n, r in done.items():
+            for w in r.get("warnings", []):
+                log.warning(f"venue {n}: {w}")
+            if not r.get("ok"):
+                out[n]["failed"]["building reports"] = r["error"]
+            write_json_atomic(building_report_path(wss[n], "build"), out[n])
     return out, not_run
 
 
@@ -182,13 +194,14 @@ def _run_round(runner: Runner, fn: Any, items: dict[str, tuple], progress: Progr
 
 def _finish(workspace: str | Path, results: dict[str, dict], cfgs: dict[str, Any], index: Path | None,
             progress: Progress, prefix: str = "") -> dict:
-    """Log the floors' warnings, write a building's reports; the build report without times."""
+    """Log the floors' warnings, write a building's reports (``index`` None: none); the build report
+    without times."""
     for name, r in results.items():
         for w in r.get("warnings", []):
             log.warning(f"{prefix}floor {name}: {w}" if index is not None else f"{prefix}{w}")
     if index is not None:
         progress.phase("building reports")
-        _building_reports(workspace, results, cfgs["evaluate"], index)
+        write_building_reports(workspace, results, cfgs["evaluate"], index)
     return {"stage": "build", "scheduler": cfgs["build"].scheduler, "floors": results,
             "failed": {n: r["error"] for n, r in results.items() if not r.get("ok")}, "building": index is not None}
 
@@ -205,25 +218,3 @@ def _seconds(t: Any) -> float:
     """A report's time: a number, or the "total" of a dict of times."""
     v = t.get("total") if isinstance(t, dict) else t
     return round(float(v), 3) if isinstance(v, int | float) else 0.0
-
-
-def _building_reports(workspace: str | Path, results: dict[str, dict], eval_cfg: Any, index: Path) -> None:
-    """building/<command>.json of each stage some floor ran now, and the page linking the floors' reports."""
-    from rmbuild.stages.floor_eval import floor_totals
-
-    ok = {n: r for n, r in results.items() if r.get("ok")}
-    for command, stage in BUILDING_REPORTS:
-        ran = [n for n, r in ok.items() if command in r["stages"]]
-        if not ran:
-            continue
-        report = building_report(workspace, command, stage)
-        report["ran_floors"] = ran
-        if command == "evaluate":
-            try:
-                report["building"].update(floor_totals(Path(workspace), report["floors"], eval_cfg))
-            except RmbuildError as e:  # classifying needs every floor's data: a broken floor stops only this
-                report["building"]["floor_classification_error"] = one_line(str(e))
-                log.warning(f"building evaluate: no floor classification: {one_line(str(e))}")
-        write_json_atomic(building_report_path(workspace, command), report)
-    pages = {n: r["stages"]["report"] for n, r in ok.items()}
-    write_text_atomic(index, building_page(workspace, pages, index))

@@ -15,13 +15,19 @@ import socket
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 from rmbuild.config import load_stage_config_text
-from rmbuild.errors import InputError
-from rmbuild.io.workspace import Workspace
+from rmbuild.errors import InputError, RmbuildError, one_line
+from rmbuild.io.atomic import write_json_atomic, write_text_atomic
+from rmbuild.io.workspace import Workspace, building_report_path
+from rmbuild.stages.building import building_page, building_report
 
 #: the stage config sections a floor task needs (TOML text of each, as written next to outputs)
 TASK_SECTIONS = ("optimize", "map", "evaluate")
+#: building report per floor-task stage: (command, stage whose floor reports it gathers)
+BUILDING_REPORTS = (("optimize", "optimize"), ("export-map", "map"), ("evaluate", "evaluate"))
 
 
 def run_floor(name: str, path: str, configs: dict[str, str], force: bool) -> dict:
@@ -122,3 +128,34 @@ def ingest_venue(name: str, inputs: list[str], workspace: str, configs: dict[str
                             floorplan=floorplan)
     return {"venue": name, "ok": True, "ingest": report, "warnings": warnings,
             "time_s": round(time.perf_counter() - t0, 3)}
+
+
+def building_reports_task(workspace: str, results: dict[str, dict], evaluate_toml: str, index: str) -> dict:
+    """:func:`write_building_reports` as a task of `build --venues` (its caller holds the building's lock)."""
+    cfg = load_stage_config_text("evaluate", evaluate_toml, "[evaluate] config of the build")
+    with captured_warnings() as warnings:
+        write_building_reports(workspace, results, cfg, Path(index))
+    return {"ok": True, "warnings": warnings}
+
+
+def write_building_reports(workspace: str | Path, results: dict[str, dict], eval_cfg: Any, index: Path) -> None:
+    """building/<command>.json of each stage some floor ran now, and the page linking the floors' reports."""
+    from rmbuild.stages.floor_eval import floor_totals
+
+    log = logging.getLogger(__name__)
+    ok = {n: r for n, r in results.items() if r.get("ok")}
+    for command, stage in BUILDING_REPORTS:
+        ran = [n for n, r in ok.items() if command in r["stages"]]
+        if not ran:
+            continue
+        report = building_report(workspace, command, stage)
+        report["ran_floors"] = ran
+        if command == "evaluate":
+            try:
+                report["building"].update(floor_totals(Path(workspace), report["floors"], eval_cfg))
+            except RmbuildError as e:  # classifying needs every floor's data: a broken floor stops only this
+                report["building"]["floor_classification_error"] = one_line(str(e))
+                log.warning(f"building evaluate: no floor classification: {one_line(str(e))}")
+        write_json_atomic(building_report_path(workspace, command), report)
+    pages = {n: r["stages"]["report"] for n, r in ok.items()}
+    write_text_atomic(index, building_page(workspace, pages, index))
