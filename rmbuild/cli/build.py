@@ -23,7 +23,7 @@ from rmbuild.io.formats import reader_names
               help="GeoJSON floor plan, as for `rmbuild ingest --floorplan`.")
 @click.option("--scheduler", default=None, metavar="serial|local[:N]|tcp://HOST:PORT",
               help="Where the floors run: in this process one after the other, on a Dask cluster of N local "
-                   "worker processes, or on a running Dask scheduler (default from config [build]: local).")
+                   "worker processes, or on a running Dask scheduler (default from config [build]: serial).")
 @common_options
 def build(inputs, workspace, venues_path, out_dir, fmt, floorplan, scheduler, config_path, force, quiet, verbose):
     """Run the whole pipeline on INPUTS into -w WORKSPACE (or on every venue of --venues into -o OUT_DIR):
