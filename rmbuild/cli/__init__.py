@@ -27,6 +27,7 @@ COMMANDS = {
     "view": "rmbuild.cli.view:view",
     "report": "rmbuild.cli.report:report",
     "config": "rmbuild.cli.config_cmd:config",
+    "build": "rmbuild.cli.build:build",
 }
 
 #: one-line summaries shown by `rmbuild --help` without importing the commands
@@ -41,6 +42,7 @@ SUMMARIES = {
     "view": "Log a workspace to the rerun viewer.",
     "report": "Write a one-page HTML report of a workspace.",
     "config": "Print every stage's settings as TOML (defaults, or a file resolved).",
+    "build": "The whole pipeline in one command; floors run as parallel (Dask) tasks.",
 }
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbuild.config.base import from_dict, load_toml, parse_toml, section_of, to_dict, to_toml, toml_key_line
+from rmbuild.config.build import BuildConfig
 from rmbuild.config.evaluate import EvaluateConfig
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.optimize import OptimizeConfig
@@ -26,6 +27,7 @@ SECTIONS: dict[str, type] = {
     "optimize": OptimizeConfig,
     "map": MapConfig,
     "evaluate": EvaluateConfig,
+    "build": BuildConfig,
 }
 
 
@@ -86,6 +88,7 @@ def _merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 
 __all__ = [
     "SECTIONS",
+    "BuildConfig",
     "EvaluateConfig",
     "IngestConfig",
     "MapConfig",

@@ -1,0 +1,222 @@
+"""`rmbuild build`: the whole pipeline in one command, the floors of a building as tasks run in this
+process (serial) or on a Dask LocalCluster of worker processes; both give the same outputs, and a failed
+floor is reported without stopping the others."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pytest
+from cli_util import run_cli
+
+from rmbuild.config import load_stage_config
+from rmbuild.config.build import parse_scheduler
+from rmbuild.config.simulate import preset_config
+from rmbuild.errors import ConfigError
+from rmbuild.io.workspace import Workspace, building_floors, building_report_path
+from rmbuild.stages import build, simulate
+
+pytest.importorskip("distributed")
+
+#: per floor: the tables whose values must not depend on where the floor ran
+TABLES = ("optimize.poses", "optimize.pairs", "map.cells", "map.nodes", "evaluate.tracks")
+#: report keys that measure the run, not its result
+VOLATILE = {"time_s", "peak_memory_mb", "peak_rss_mb", "worker", "path", "png_dir", "bytes"}
+
+
+def _configs(scheduler: str) -> dict[str, Any]:
+    cfgs = {s: load_stage_config(s) for s in build.SECTIONS}
+    cfgs["build"] = replace(cfgs["build"], scheduler=scheduler)
+    return cfgs
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """A simulated tiny building of two floors, built with `rmbuild build --scheduler serial` (the CLI) and
+    with the stage on a LocalCluster of 2 worker processes."""
+    base = tmp_path_factory.mktemp("build")
+    cfg = preset_config("tiny", 5)
+    simulate.run(base / "input", replace(cfg, building=replace(cfg.building, floors=2)))
+    return {"input": base / "input", "base": base}
+
+
+@pytest.fixture(scope="module")
+def serial_ws(runs: dict[str, Path]) -> Path:
+    """The building built by the CLI in this process, one floor after the other."""
+    from rmbuild.cli import main
+
+    ws = runs["base"] / "ws_serial"
+    with pytest.raises(SystemExit) as e:
+        main(["build", str(runs["input"]), "-w", str(ws), "--scheduler", "serial", "-q"])
+    assert e.value.code == 0
+    return ws
+
+
+@pytest.fixture(scope="module")
+def local_ws(runs: dict[str, Path]) -> tuple[Path, dict]:
+    ws = runs["base"] / "ws_local"
+    r = build.run([runs["input"]], ws, _configs("local:2"))
+    return ws, r
+
+
+def _strip(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _strip(v) for k, v in x.items() if k not in VOLATILE}
+    if isinstance(x, list):
+        return [_strip(v) for v in x]
+    return x
+
+
+def test_serial_and_local_cluster_give_the_same_outputs(serial_ws, local_ws) -> None:
+    a, (b, r) = serial_ws, local_ws
+    assert not r["failed"] and set(r["floors"]) == {"F1", "F2"}
+    assert len({f["worker"] for f in r["floors"].values()}) == 2  # two worker processes, one floor each
+    fa, fb = building_floors(a) or {}, building_floors(b) or {}
+    assert list(fa) == list(fb) == ["F1", "F2"]
+    for name in fa:
+        wa, wb = Workspace.open(fa[name]), Workspace.open(fb[name])
+        for key in TABLES:
+            ta, tb = wa.read_table(key), wb.read_table(key)
+            assert len(ta) > 0, key
+            pd.testing.assert_frame_equal(ta, tb, check_exact=False, rtol=0, atol=1e-9, obj=f"{name} {key}")
+        for stage in ("optimize", "map", "evaluate"):
+            assert _strip(wa.read_report(stage)) == _strip(wb.read_report(stage)), (name, stage)
+    for command in ("optimize", "export-map", "evaluate"):
+        ra = json.loads(building_report_path(a, command).read_text())
+        rb = json.loads(building_report_path(b, command).read_text())
+        assert ra["ran_floors"] == ["F1", "F2"]
+        assert _strip(ra) == _strip(rb), command
+    ev = json.loads(building_report_path(b, "evaluate").read_text())["building"]
+    assert ev["floor_classification"]["hit_rate"] > 0.9
+    assert (b / "report.html").is_file() and (fb["F2"] / "report.html").is_file()
+
+
+def test_a_failed_floor_is_reported_and_the_other_completes(serial_ws, runs) -> None:
+    ws = runs["base"] / "ws_broken"
+    shutil.copytree(serial_ws, ws)
+    floors = building_floors(ws) or {}
+    poses = Workspace.open(floors["F2"]).path("data.poses")
+    poses.write_bytes(poses.read_bytes()[:100])  # truncated after ingest: its checksum no longer matches
+    before = Workspace.open(floors["F1"]).read_table("optimize.poses")
+    r = build.run_floors_as_tasks(ws, _configs("local:2"), force=True)
+    assert list(r["failed"]) == ["F2"] and "poses" in r["failed"]["F2"] and "\n" not in r["failed"]["F2"]
+    assert r["floors"]["F1"]["ok"] and "evaluate" in r["floors"]["F1"]["stages"]
+    pd.testing.assert_frame_equal(Workspace.open(floors["F1"]).read_table("optimize.poses"), before)
+    rep = json.loads(building_report_path(ws, "optimize").read_text())
+    assert rep["ran_floors"] == ["F1"]
+
+
+def test_without_force_an_existing_workspace_is_kept(serial_ws, runs, capsys) -> None:
+    ws = serial_ws
+    before = (ws / "manifest.json").read_text()
+    res = run_cli(capsys, "build", runs["input"], "-w", ws, "--scheduler", "serial")
+    assert res.code == 2 and "--force" in res.err
+    assert (ws / "manifest.json").read_text() == before
+
+
+def test_scheduler_values() -> None:
+    assert parse_scheduler("serial").kind == "serial"
+    assert parse_scheduler("local") == ("local", None, None)
+    assert parse_scheduler("local:3").workers == 3
+    assert parse_scheduler("tcp://10.0.0.5:8786").address == "tcp://10.0.0.5:8786"
+    for bad in ("local:0", "locale", "threads", "10.0.0.5:8786", "tcp://host"):
+        with pytest.raises(ValueError):
+            parse_scheduler(bad)
+    with pytest.raises(ConfigError, match="scheduler"):
+        load_stage_config("build", overrides={"scheduler": "local:x"})
+
+
+def _dies_on(name: str) -> dict:
+    """A task that kills its own worker process for item "dead" (as the kernel's OOM killer would)."""
+    import os
+
+    if name == "dead":
+        os._exit(9)
+    return {"ok": True, "pid": os.getpid()}
+
+
+def test_a_killed_worker_fails_its_task_only() -> None:
+    import dask
+
+    from rmbuild.stages.dask_run import run_tasks
+
+    seen: list[str] = []
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):  # no retry on a fresh worker
+        out = run_tasks(_dies_on, {"alive": ("alive",), "dead": ("dead",)}, parse_scheduler("local:2"),
+                        on_done=lambda name, r: seen.append(name))
+    assert list(out) == ["alive", "dead"] and sorted(seen) == ["alive", "dead"]
+    assert out["alive"]["ok"] and not out["dead"]["ok"]
+    assert "KilledWorker" in out["dead"]["error"] and "\n" not in out["dead"]["error"]
+
+
+def _venues_file(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "venues.toml"
+    p.write_text(text)
+    return p
+
+
+def test_venues_a_failed_venue_does_not_stop_the_others(tmp_path: Path, capsys) -> None:
+    from conftest import make_input_tables, write_tables
+
+    mall = make_input_tables(n_walks=4)
+    mall["walks"]["floor"] = ["F1", "F1", "F2", "F2"]  # a small building of two floors
+    write_tables(mall, tmp_path / "mall")
+    bad = make_input_tables(n_walks=3)
+    bad["wifi"].loc[5, "rssi_dbm"] = 40.0  # outside the valid RSSI range: ingest rejects the venue
+    write_tables(bad, tmp_path / "bad")
+    venues = _venues_file(tmp_path, '[[venue]]\nname = "mall"\ninputs = ["mall"]\n\n'
+                                    '[[venue]]\nname = "bad"\ninputs = "bad"\nformat = "rmbuild"\n')
+    out = tmp_path / "out"
+    res = run_cli(capsys, "build", "--venues", venues, "-o", out, "--scheduler", "serial")
+    assert res.code == 2, res.err
+    assert "venue bad: FAILED" in res.out and "rssi" in res.out.lower()
+    assert "1 failed: bad" in res.err
+    # one fix per walk: too little ground truth to score a floor's map, which stands unscored
+    assert res.out.count("not evaluated: evaluate:") == 2
+    rep = json.loads(building_report_path(out / "mall", "export-map").read_text())
+    assert rep["ran_floors"] == ["F1", "F2"] and rep["building"]["cells"] > 0
+    assert json.loads(building_report_path(out / "mall", "build").read_text())["failed"] == {}
+    assert (out / "mall" / "report.html").is_file()
+    assert not (out / "bad" / "manifest.json").exists()
+    before = (out / "mall" / "manifest.json").read_text()
+    res = run_cli(capsys, "build", "--venues", venues, "-o", out, "--scheduler", "serial")
+    assert res.code == 2 and "--force" in res.err  # an existing venue workspace is kept without --force
+    assert (out / "mall" / "manifest.json").read_text() == before
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\nanchors = "x.csv"\n', "venues.toml:1: venue 1: unknown key 'anchors'"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\n\n[[venue]]\nname = "a"\ninputs = ["in"]\n', "given twice"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\n\n[[venue]]\nname = "b"\ninputs = ["nope"]\n',
+     "venues.toml:5: venue 'b': inputs:"),
+    ('[[venue]]\nname = "../up"\ninputs = ["in"]\n', "name must be a directory name"),
+    ('[[venue]]\nname = "a"\ninputs = ["in"]\nformat = "xls"\n', "format must be one of"),
+    ("[build]\nscheduler = 'serial'\n", "holds [[venue]] tables only"),
+])
+def test_venues_file_errors(tmp_path: Path, text: str, problem: str) -> None:
+    from rmbuild.io.formats import reader_names
+    from rmbuild.io.venues import read_venues
+
+    (tmp_path / "in").mkdir()
+    with pytest.raises(ConfigError) as e:
+        read_venues(_venues_file(tmp_path, text), reader_names())
+    assert problem in str(e.value)
+
+
+def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
+    import logging
+
+    from rmbuild.stages.floor_task import captured_warnings
+
+    log = logging.getLogger("rmbuild.stages.optimize")
+    with caplog.at_level(logging.INFO, logger="rmbuild"), captured_warnings() as warnings:
+        log.warning("plan fit doubtful")
+        log.info("phase done")
+    log.warning("after")
+    assert warnings == ["plan fit doubtful"]
+    assert [r.getMessage() for r in caplog.records] == ["phase done", "after"]
