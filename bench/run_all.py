@@ -9,7 +9,8 @@ import traceback
 from bench.common import RESULTS
 from bench.summary import write_summary
 
-BENCHES = ["bench_ingest", "bench_optimize", "bench_map", "bench_pdr", "bench_localizers", "bench_uiloc", "bench_viz"]
+BENCHES = ["bench_ingest", "bench_optimize", "bench_map", "bench_pdr", "bench_localizers", "bench_uiloc", "bench_viz",
+           "bench_scale"]
 
 
 def main() -> int:

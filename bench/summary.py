@@ -70,6 +70,9 @@ ROWS: list[Row] = [
         f"{f['floor']} {f['linked_pct']:.0f} %" for f in d["floors"])),
     Row("real_after", "real floors: kNN median, map built / surveyed", lambda d: ", ".join(
         f"{f['floor']} {f['knn']['ratio']:.2f}×" for f in d["floors"])),
+    Row("scale", "`rmbuild build` serial / `local:2` wall time per MS ILC site (outputs equal)", lambda d: ", ".join(
+        f"{k} {v['runs']['serial']['wall_s'] / v['runs']['local:2']['wall_s']:.2f}×" for k, v in d["sites"].items()),
+        "", "up to ~1.8"),
     Row("bench_pdr", "phone PDR own-fit median error per ILC floor", lambda d: ", ".join(
         f"{k} {v['own_fit_median_m']:.2f}" for k, v in d["ilc"].items()), "m"),
     Row("fuzz", "fuzzed inputs ending otherwise than exit 0 / one-line exit 2", lambda d: d["failures"], "",
