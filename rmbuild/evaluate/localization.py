@@ -283,23 +283,8 @@ def evaluate(
     """
     cfg = cfg or EvaluateConfig()
     map_cfg = map_cfg or MapConfig()
-    for c in (cfg, map_cfg):
-        try:
-            c.validate()
-        except ValueError as e:
-            raise InputError(f"config: {e}") from None
-    if gauge not in (*BUILDING_FRAME_GAUGES, "se2"):
-        raise InputError(f"gauge must be one of {', '.join((*BUILDING_FRAME_GAUGES, 'se2'))}, got {gauge!r}")
-    built_xy = np.asarray(built_xy, dtype=float)
-    if built_xy.shape != (dataset.n_nodes, 2):
-        raise InputError(f"built positions have shape {built_xy.shape}, expected ({dataset.n_nodes}, 2)")
-    if dataset.wifi is None or len(dataset.wifi) == 0:
-        raise InputError("no Wi-Fi readings: nothing to build a map from or to localize")
+    built_xy = _checked_inputs(dataset, built_xy, cfg, map_cfg, gauge)
     map_walks, test, rule = split_walks(dataset, cfg, test_walks)
-    from rmbuild.localize.base import localizer_class
-
-    for name in cfg.localizers:
-        localizer_class(name)  # unknown names fail before any work
 
     unavailable: dict[str, str] = {}
     ref_xy, src = reference_positions(dataset)
@@ -351,6 +336,41 @@ def evaluate(
     q_node = query.node
     q_built = np.where((q_node >= 0)[:, None], built_al[np.maximum(q_node, 0)], np.nan)
 
+    stats, errors, preds, consistency = _localize_all(maps, cfg, query, q_ref, q_built, src is not None, progress)
+    if src is None:
+        stats, errors = {}, {}
+    return EvalResult(
+        gauge=gauge, test_walks=test, map_walks=map_walks, split_rule=rule, reference_source=src,
+        stats=stats, errors=errors, predictions=preds, query=query, query_ref_xy=q_ref, alignment=alignment,
+        unavailable=unavailable, consistency=consistency, maps=maps, localizers=list(cfg.localizers),
+    )
+
+
+def _checked_inputs(dataset: Dataset, built_xy: np.ndarray, cfg: EvaluateConfig, map_cfg: MapConfig,
+                    gauge: str) -> np.ndarray:
+    """``built_xy`` as float; InputError for a bad config, gauge, shape, no readings or unknown localizer."""
+    for c in (cfg, map_cfg):
+        try:
+            c.validate()
+        except ValueError as e:
+            raise InputError(f"config: {e}") from None
+    if gauge not in (*BUILDING_FRAME_GAUGES, "se2"):
+        raise InputError(f"gauge must be one of {', '.join((*BUILDING_FRAME_GAUGES, 'se2'))}, got {gauge!r}")
+    built_xy = np.asarray(built_xy, dtype=float)
+    if built_xy.shape != (dataset.n_nodes, 2):
+        raise InputError(f"built positions have shape {built_xy.shape}, expected ({dataset.n_nodes}, 2)")
+    if dataset.wifi is None or len(dataset.wifi) == 0:
+        raise InputError("no Wi-Fi readings: nothing to build a map from or to localize")
+    from rmbuild.localize.base import localizer_class
+
+    for name in cfg.localizers:
+        localizer_class(name)  # unknown names fail before any work
+    return built_xy
+
+
+def _localize_all(maps: dict[str, RadioMap], cfg: EvaluateConfig, query: Query, q_ref: np.ndarray,
+                  q_built: np.ndarray, have_truth: bool, progress: Callable[[str, dict], None] | None):
+    """Every localizer on every map: (stats, errors, predictions, consistency) per map and localizer."""
     stats: dict[str, dict[str, dict]] = {}
     errors: dict[str, dict[str, np.ndarray]] = {}
     preds: dict[str, dict[str, np.ndarray]] = {}
@@ -371,17 +391,11 @@ def evaluate(
                 progress("localize", {"map": mname, "localizer": lname, "scans": len(query), "total": total,
                                       "done": sum(len(d) for d in preds.values()) * len(query),
                                       "time_s": time.perf_counter() - t_loc})
-            if src is not None:
+            if have_truth:
                 err = np.hypot(*(p - q_ref).T)
                 errors[mname][lname] = err
                 # localizer-specific figures (e.g. SLAC's calibrated k, b, alpha, beta) beside the errors
                 stats[mname][lname] = {**error_stats(err), **loc.summary()}
             if mname == "built":
                 consistency.setdefault("built", {})[lname] = error_stats(np.hypot(*(p - q_built).T))
-    if src is None:
-        stats, errors = {}, {}
-    return EvalResult(
-        gauge=gauge, test_walks=test, map_walks=map_walks, split_rule=rule, reference_source=src,
-        stats=stats, errors=errors, predictions=preds, query=query, query_ref_xy=q_ref, alignment=alignment,
-        unavailable=unavailable, consistency=consistency, maps=maps, localizers=list(cfg.localizers),
-    )
+    return stats, errors, preds, consistency
