@@ -129,6 +129,11 @@ def optimize(
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
     line = report.unlinked_warning(walks, walks_df, placement.reference)
     warnings += [line] if line else []
+    if placement.refuted:
+        warnings.append(f"{len(placement.refuted)} walk(s) left unplaced: where the Wi-Fi fit put them the radio "
+                        "disagrees with the walks already there (RF check): "
+                        + ", ".join(walks.walk_ids[w] for w in placement.refuted[:5])
+                        + (" ..." if len(placement.refuted) > 5 else ""))
     if walks.n_walks > 1 and walks_df["linked"].sum() <= 1:
         warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
     for wmsg in warnings:
@@ -176,6 +181,7 @@ def _stats(walks: WalkSet, placement: Placement, outcome: SolveOutcome, checks, 
         "walk_pairs_tested": placement.edge_fits[0], "walk_pairs_accepted": placement.edge_fits[1],
         "reference_walk": walks.walk_ids[placement.reference], "frame": placement.frame,
         "linked_walks": int((placement.linked & keep).sum()),
+        "refuted_walks": [walks.walk_ids[w] for w in placement.refuted],
         "anchored_only_walks": int((placement.anchored & ~placement.linked).sum()),
         "components": int(placement.component.max() + 1) if walks.n_walks else 0,
         "initial_cost": outcome.initial_cost, "final_cost": outcome.final_cost,

@@ -61,10 +61,11 @@ def _cross_pair_counts(walks: WalkSet, pairs: pd.DataFrame):
 def placement_labels(placement: Placement, linked: np.ndarray, anchored: np.ndarray) -> np.ndarray:
     """How each walk got its initial frame: "reference", "translation" / "se2" (walk-to-map fit with the
     compass rotation / with a fitted one), "pair" (a walk-pair edge), "merge" (its component was fitted to
-    the map as one body), "anchor" (not linked, placed by anchors), "" (neither, or every walk at the origin)."""
+    the map as one body), "anchor" (not linked, placed by anchors), "refuted" (not linked: the RF check
+    contradicted its fit), "" (neither, or every walk at the origin)."""
     out = np.array(placement.method, dtype=object, copy=True)
     out[placement.reference] = "reference"
-    out[~linked] = ""
+    out[~linked & (out != "refuted")] = ""
     out[~linked & anchored] = "anchor"
     return out
 

@@ -27,7 +27,9 @@ def _placed_by(row: pd.Series) -> str:
     if bool(row.get("reference", False)):
         return "reference walk"
     if not bool(row.get("linked", True)):
-        return "anchors" if bool(row.get("anchored", False)) else "not placed"
+        if bool(row.get("anchored", False)):
+            return "anchors"
+        return "not placed (RF check refuted its fit)" if row.get("placement") == "refuted" else "not placed"
     how = str(row.get("placement") or "")
     return PLACED_BY.get(how, how or "linked")
 

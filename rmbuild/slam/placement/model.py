@@ -60,7 +60,8 @@ class Placement:
 
     ``world_T_walk`` (n_walks, 3); ``component`` (n_walks,) 0 = the reference walk's (linked) component;
     ``heading_known`` walks whose compass rotation is trusted; ``method`` how each walk was placed
-    ("seed", "translation", "se2", "pair", "merge", ""); ``links`` (node_k, node_q) scan links the kNN
+    ("seed", "translation", "se2", "pair", "merge", "refuted" (unlinked by the RF check), "");
+    ``links`` (node_k, node_q) scan links the kNN
     rounds placed walks with, or None; ``gate_m`` the distance (m) within which a correspondence is
     consistent with this placement, None when the placement verified nothing (every walk at the origin).
     ``frame`` names the map's frame ("reference walk", "floorplan", "anchors"). Anchors and a floor plan
@@ -69,7 +70,8 @@ class Placement:
     ``anchored``; without anchors each component's root gets a full gauge prior.
     ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
     ``round_placed`` / ``n_inliers`` / ``shared_m`` (n_walks,): the growth round a walk was placed in (-1
-    never, 0 for seeds), its inlier scans and shared path (m) then.
+    never, 0 for seeds), its inlier scans and shared path (m) then; ``refuted`` the walks the RF check
+    (:mod:`.rfcheck`) took out of the reference component.
     """
 
     world_T_walk: np.ndarray
@@ -90,6 +92,7 @@ class Placement:
     round_placed: np.ndarray | None = None
     n_inliers: np.ndarray | None = None
     shared_m: np.ndarray | None = None
+    refuted: list[int] = field(default_factory=list)
 
     @property
     def linked(self) -> np.ndarray:

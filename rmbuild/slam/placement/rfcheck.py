@@ -1,0 +1,100 @@
+"""The RF check of a placement: does the walk, where a fit puts it, look like the map it lands on?
+
+A fit is proposed by the scans or links that agree with it (its inliers). A walk put in the wrong place by a
+handful of look-alike scans shows itself in everything else it overlaps: where the fit lays it over placed
+scans, the radio differs. For each of the walk's scans with placed scans within the RF model's near
+distance (:data:`rmbuild.slam.rfmodel.NEAR_M`) under the fit, the median over those neighbours of the RF
+model's log likelihood ratio (near vs far) says whether the overlap looks near; the check is the mean of
+these over the overlapping scans. Calibrated per data set by the RF model, it means the same in every venue.
+
+:func:`refute` applies it once placement is done, before the solve: each linked walk against the rest of the
+reference component; a walk the overlap contradicts is left unlinked rather than pulled to a wrong place.
+(Applied inside growth instead, refusing each fit as it is made, it changed which walks seed the later
+merges and cost MS ILC site1/F2 23 linked walks; docs/optimize.md.)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rmbuild import geometry
+from rmbuild.slam.problem import WalkSet
+from rmbuild.slam.rfmodel import NEAR_M
+
+
+@dataclass
+class OverlapEvidence:
+    """What a fit's overlap with the placed map says: scans of the walk with placed scans within NEAR_M, and
+    the mean over them of the median log LR of their RSS distances to those neighbours (NaN if none)."""
+
+    n_overlap: int
+    mean_log_lr: float
+
+
+# a linked walk whose overlap with the rest of its component has a mean log LR below this is refuted (left
+# unlinked); a walk overlapping fewer than MIN_OVERLAP_SCANS scans is not judged. Chosen on five MS ILC floors
+# and IPIN 2023 -2 (docs/optimize.md, "RF check"): refuted walks there had 1.3-2.2x the others' error.
+MIN_OVERLAP_LOG_LR = -0.5
+MIN_OVERLAP_SCANS = 5
+# passes of the check at most (each after removing the walks the last one refuted)
+MAX_REFUTE_PASSES = 5
+
+
+def refute(placement, walks: WalkSet, sim) -> list[int]:
+    """Walks of the reference component whose placement the RF check contradicts: each is moved into a
+    component of its own (unlinked, kept where it is); returns them. Repeated until none is refuted, as a
+    walk placed onto a refuted one may agree with it and with nothing else. The reference walk is kept."""
+    check = OverlapCheck(walks, sim)
+    comp = placement.component
+    xy = walks.world_xy(placement.world_T_walk, sim.row_node)
+    out: list[int] = []
+    for _ in range(MAX_REFUTE_PASSES):
+        bad: list[int] = []
+        for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
+            if w == placement.reference:
+                continue
+            others = np.flatnonzero((comp[check.row_walk] == 0) & (check.row_walk != w))
+            ev = check.evidence(w, placement.world_T_walk[w], others, xy[others])
+            if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < MIN_OVERLAP_LOG_LR:
+                bad.append(w)
+        for w in bad:
+            comp[w] = int(comp.max()) + 1
+            placement.method[w] = "refuted"
+        out += bad
+        if not bad:
+            break
+    return out
+
+
+class OverlapCheck:
+    """The RF check of fits against the placed scans (module docstring)."""
+
+    def __init__(self, walks: WalkSet, sim):
+        self.walks, self.sim = walks, sim
+        self.row_walk = walks.walk_of[sim.row_node]
+        self.rows_of = [np.flatnonzero(self.row_walk == w) for w in range(walks.n_walks)]
+
+    def evidence(self, w: int, t: np.ndarray, placed_rows: np.ndarray, placed_xy: np.ndarray) -> OverlapEvidence:
+        """Walk ``w`` under world_T_walk ``t`` against the placed scans ``placed_rows`` at ``placed_xy``."""
+        rw = self.rows_of[w]
+        if not len(rw) or not len(placed_rows):
+            return OverlapEvidence(0, float("nan"))
+        own = self.walks.raw[self.sim.row_node[rw], :2]
+        xy = own @ geometry.rot(float(t[2])).T + t[:2]
+        hits = cKDTree(placed_xy).query_ball_point(xy, NEAR_M)
+        has = np.array([len(h) > 0 for h in hits])
+        if not has.any():
+            return OverlapEvidence(0, float("nan"))
+        cols = np.unique(np.concatenate([hits[i] for i in np.flatnonzero(has)]).astype(np.int64))
+        near = np.linalg.norm(xy[has][:, None, :] - placed_xy[cols][None, :, :], axis=2) < NEAR_M
+        d, common = self.sim.rss.block(rw[has], placed_rows[cols])
+        ok = near & (common >= self.sim.min_common)
+        llr = np.where(ok, self.sim.rf.log_lr(np.where(ok, d, 0.0)), np.nan)
+        seen = ok.any(axis=1)
+        if not seen.any():
+            return OverlapEvidence(0, float("nan"))
+        per_scan = np.nanmedian(llr[seen], axis=1)
+        return OverlapEvidence(int(seen.sum()), float(np.mean(per_scan)))
