@@ -40,9 +40,8 @@ from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import Links, RotationPriors, Ties
 from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, CompassSource
 from rmbuild.slam.evidence.continuity import JOIN_CAUCHY_K, ContinuitySource
-from rmbuild.slam.evidence.wifi import search_params
 from rmbuild.slam.factors import X, fuzzy_error, poses_to_values, values_to_poses, vicinity_factor, vicinity_noise
-from rmbuild.slam.pairs import RowMeta, _allowed, _best_run_pairs, _segments, window_median
+from rmbuild.slam.pairs import RowMeta, window_median
 from rmbuild.slam.pipeline import OptimizeResult
 from rmbuild.slam.placement.edges import RANSAC_SEED
 from rmbuild.slam.placement.grow import MAX_ROUNDS, GrowthEvidence, PairEvidence, ScanEvidence
@@ -50,7 +49,7 @@ from rmbuild.slam.placement.link import link_components
 from rmbuild.slam.placement.merge import _merge_one as merge_onto
 from rmbuild.slam.placement.model import GrowState
 from rmbuild.slam.problem import WalkSet
-from rmbuild.slam.rfmodel import calibrate
+from rmbuild.slam.rfmodel import RFModel, calibrate
 from rmbuild.slam.rss import RssMatrix
 from rmbuild.slam.solve import KEYFRAME_MAX_GAP, levenberg_marquardt
 from rmbuild.types import Dataset, Fingerprints
@@ -64,7 +63,10 @@ HOLD_SIGMA_RAD = 0.001
 # solves; the first uses the links within the placement gate, each further one those within d_max at the
 # poses it starts from (the full run's default outer_iterations)
 SOLVES = 3
-# segments per block of the candidate search's distance products
+# Wi-Fi vicinity candidates kept per scan of a free walk (the cap per node of the paper's rule in
+# rmbuild.slam.pairs.SearchParams.max_pairs_per_node)
+CANDIDATES_PER_SCAN = 10
+# fingerprint rows per block of the candidate search's distance products
 BLOCK_ROWS = 2048
 # kNN growth / continuity-join alternations at most (the full run's merge rounds)
 LINK_ROUNDS = 3
@@ -134,7 +136,8 @@ def optimize_incremental(dataset: Dataset, fingerprints: Fingerprints, cfg: Opti
 
     t0 = time.perf_counter()
     ref = _reference(mw, prev, sp.held)
-    st, (lk, lq), ties, rot, prior, plog = _place(walks, mw, sp.held, ref, cfg)
+    rf_report = (prev.report.get("vicinity") or {}).get("rf_model")
+    st, (lk, lq), ties, rot, prior, plog = _place(walks, mw, sp.held, ref, cfg, rf_report)
     placed = sp.free & (st.comp == 0)
     if progress:
         progress("init", {"linked": int((st.comp == 0).sum()), "walks": walks.n_walks})
@@ -188,14 +191,39 @@ class _Locator:
     min_common: int
 
 
-def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: OptimizeConfig):
+def free_window_median(rss: RssMatrix, meta: RowMeta, rows: np.ndarray, cfg: OptimizeConfig) -> np.ndarray:
+    """Each free scan's similarity threshold, its own walk's window median (:func:`window_median` on the
+    free walks' rows only; the held rows, never localised, NaN)."""
+    idx = np.flatnonzero(rows)
+    out = np.full(len(rows), np.nan, np.float32)
+    sub = RssMatrix(rss.a[idx], rss.b[idx], rss.sq[idx], rss.cnt[idx])
+    out[idx] = window_median(sub, RowMeta(*(getattr(meta, f)[idx] for f in ("node", "walk", "step", "t_s", "path_m"))),
+                             cfg.wifi.window_steps)
+    return out
+
+
+def _rf_model(report: dict | None, walks: WalkSet, rss: RssMatrix, meta: RowMeta, rows: np.ndarray,
+              cfg: OptimizeConfig) -> RFModel:
+    """The data set's RF model: the one the last optimize calibrated (its report), else calibrated on the
+    free walks' scans."""
+    if report and all(k in report for k in ("near_mu", "near_sigma", "far_mu", "far_sigma")):
+        return RFModel(float(report["near_mu"]), float(report["near_sigma"]), float(report["far_mu"]),
+                       float(report["far_sigma"]), int(report.get("n_near", 0)), int(report.get("n_far", 0)))
+    idx = np.flatnonzero(rows)
+    sub = RssMatrix(rss.a[idx], rss.b[idx], rss.sq[idx], rss.cnt[idx])
+    return calibrate(sub, meta.walk[idx], walks.raw[meta.node[idx], :2], meta.path_m[idx], meta.t_s[idx],
+                     cfg.wifi.min_common_aps)
+
+
+def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: OptimizeConfig, rf_report: dict | None):
     """kNN growth of the free walks from the held ones (component 0, identity frames); then the walks left
     over joined along continuity ties (turned to the compass first) and, when some were, growth again."""
     fp = mw.fingerprints
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
-    locator = _Locator(rss, fp.node, window_median(rss, meta, cfg.wifi.window_steps), cfg.wifi.min_common_aps)
-    rf = calibrate(rss, meta.walk, walks.raw[fp.node, :2], meta.path_m, meta.t_s, cfg.wifi.min_common_aps)
+    free_rows = mw.keep[meta.walk] & ~held[meta.walk]
+    locator = _Locator(rss, fp.node, free_window_median(rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
+    rf = _rf_model(rf_report, walks, rss, meta, free_rows, cfg)
     ties = ContinuitySource(walks, cfg.continuity, rf, rss, fp.node).ties()
     rot = CompassSource(mw, cfg.compass).rotation_priors()
     prior = map_rotation_priors(rot, held)
@@ -203,7 +231,7 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     st.comp[held] = 0
     st.method[held] = "previous"
     plog: list[dict] = []
-    pk, pq = vicinity_candidates(rss, meta, mw.keep[meta.walk] & ~held[meta.walk], cfg)
+    pk, pq = vicinity_candidates(locator, meta, free_rows)
     links = Links(pk, pq)
     rng = np.random.default_rng(RANSAC_SEED)
     st = _grow(_HeldPairs(mw, pk, pq, [], cfg.placement), st, mw, rot, prior, plog)
@@ -220,44 +248,26 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     return st, (links.node_k, links.node_q), ties, rot, prior, plog
 
 
-def vicinity_candidates(rm: RssMatrix, meta: RowMeta, rows: np.ndarray, cfg: OptimizeConfig
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """The full run's run-matched candidate search (:func:`rmbuild.slam.pairs.run_matched_candidates`)
-    restricted to the free walks' scans (``rows``, bool over the fingerprint rows): each of their segments
-    keeps its top-k nearest segments of other walks (not mutual: that would ask every old segment's top-k,
-    the search being saved), then the best run-matched node pair per segment pair. Returns cross-walk node
-    pairs (k, q)."""
-    p = search_params(cfg.wifi)
-    seg = _segments(meta, p.segment_scans)
-    n_seg = int(seg.max()) + 1 if len(seg) else 0
-    cnt = np.bincount(seg, minlength=n_seg).astype(np.float32)
-    sa = np.zeros((n_seg, rm.a.shape[1]), np.float32)
-    sb = np.zeros_like(sa)
-    np.add.at(sa, seg, rm.a)
-    np.add.at(sb, seg, rm.b)
-    sa /= cnt[:, None]
-    sb /= cnt[:, None]
-    srm = RssMatrix(sa, sb, np.einsum("ij,ij->i", sa, sa, dtype=np.float64), sb.sum(axis=1, dtype=np.float64))
-    first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
-    smeta = RowMeta(meta.node[first], meta.walk[first], meta.step[first], meta.t_s[first], meta.path_m[first])
-    k = min(p.top_k, max(n_seg - 1, 1))
-    si_all, sj_all = [], []
-    todo = np.flatnonzero(rows[first])
+def vicinity_candidates(loc: _Locator, meta: RowMeta, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Wi-Fi vicinity candidates of the free walks' scans (``rows``, bool over the fingerprint rows) by the
+    paper's rule (Gu et al. 2017, eq. 9 and the window median): each keeps the CANDIDATES_PER_SCAN scans of
+    other walks nearest in RSS distance that are nearer than its own walk's window median and share enough
+    APs. One block of distance products per BLOCK_ROWS free scans against all scans (the full run's
+    run-matched search compares every scan with every other). Returns node pairs (k, q)."""
+    out_k, out_q = [], []
+    todo = np.flatnonzero(rows)
     for b0 in range(0, len(todo), BLOCK_ROWS):
         r = todo[b0:b0 + BLOCK_ROWS]
-        d, common = srm.block(r)
-        d[~_allowed(smeta, r, slice(None), p, within=False) | (common < p.min_common_aps)] = np.inf
-        nb = np.argpartition(d, k - 1, axis=1)[:, :k] if n_seg > k else np.tile(np.arange(n_seg), (len(r), 1))
+        d, common = loc.rss.block(r)
+        d[(common < loc.min_common) | (meta.walk[r][:, None] == meta.walk[None, :])] = np.inf
+        d[~(d < loc.threshold[r][:, None])] = np.inf
+        k = min(CANDIDATES_PER_SCAN, d.shape[1])
+        nb = np.argpartition(d, k - 1, axis=1)[:, :k]
         ok = np.isfinite(np.take_along_axis(d, nb, axis=1)).ravel()
-        si_all.append(np.repeat(r, nb.shape[1])[ok])
-        sj_all.append(nb.ravel()[ok])
-    if not si_all:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    si, sj = np.concatenate(si_all), np.concatenate(sj_all)
-    si, sj = np.minimum(si, sj), np.maximum(si, sj)
-    _, u = np.unique(si.astype(np.int64) * n_seg + sj, return_index=True)
-    cand = _best_run_pairs(rm, meta, seg, first, cnt.astype(np.int64), si[u], sj[u], p)
-    return meta.node[cand["row_k"].to_numpy()], meta.node[cand["row_q"].to_numpy()]
+        out_k.append(np.repeat(loc.row_node[r], k)[ok])
+        out_q.append(loc.row_node[nb.ravel()][ok])
+    empty = np.zeros(0, np.int64)
+    return (np.concatenate(out_k) if out_k else empty), (np.concatenate(out_q) if out_q else empty)
 
 
 class _HeldPairs(PairEvidence):
