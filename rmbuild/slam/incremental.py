@@ -6,18 +6,22 @@ optimize put into the map keep their optimised poses, and only the others are pl
 
 1. **The map as it is.** Each old linked walk's own-frame poses are replaced by its optimised poses, so
    its frame is the identity and its scans sit where the map has them.
-2. **Placement** (:class:`rmbuild.slam.placement.grow.ScanEvidence`, the kNN growth of the full run):
-   round by round, each free walk's scans are localised by their nearest placed scans in RSS distance
-   (eq. 9) and the walk is fitted rigidly to them — with its compass rotation relative to the map when it
-   has one, else in SE(2); walks placed in one round are map for the next. The free walks are the new ones
-   and the old walks the last optimize could not link.
+2. **Placement**, with the full run's evidence restricted to the free walks (the new ones and the old walks
+   the last optimize could not link): Wi-Fi vicinity candidates of their scans against all scans (the
+   paper's median-window rule), pair growth from the map (:class:`rmbuild.slam.placement.grow.PairEvidence`),
+   then rounds of continuity joins (:func:`rmbuild.slam.placement.link.link_components`), groups of tied
+   walks fitted onto the map as one rigid body (the full run's merges) and kNN scan growth
+   (:class:`rmbuild.slam.placement.grow.ScanEvidence`). Each walk's compass gives its rotation relative to
+   the map (the map's own compass rotation: the circular mean over the held walks). The held walks never
+   move: there is no walk-level refinement.
 3. **The solve** (Levenberg-Marquardt, gtsam): odometry of the placed free walks (chain-reduced), fuzzy
-   vicinity factors (eq. 10) on the scan links that placed them, re-selected within d_max after each
-   solve, compass heading priors where the walk's compass was trusted, and a tight prior on every old
-   node a factor touches: the old solution stays as it is.
+   vicinity factors (eq. 10) on the candidates and scan links between a placed free walk and the map,
+   those within the placement gate first, then re-selected within d_max after each solve; a robust range
+   factor per continuity tie, compass heading priors where the walk's compass was trusted, and a tight
+   prior on every old node a factor touches: the old solution stays as it is.
 
-What the full run does and this does not: no walk-pair candidate search over all scans, no anisotropic
-pairs, no same-walk pairs, no step-length scale rounds, no continuity ties, and the old walks do not move.
+What the full run does and this does not: no run-matched candidate search over all scans, no anisotropic
+pairs, no same-walk pairs, no step-length scale rounds, and the old walks do not move.
 docs/api.md says when a full re-run is the better choice.
 """
 
