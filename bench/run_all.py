@@ -10,7 +10,7 @@ from bench.common import RESULTS
 from bench.summary import write_summary
 
 BENCHES = ["bench_ingest", "bench_optimize", "bench_map", "bench_pdr", "bench_localizers", "bench_uiloc", "bench_viz",
-           "bench_scale"]
+           "bench_scale", "bench_incremental"]
 
 
 def main() -> int:

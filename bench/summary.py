@@ -73,6 +73,12 @@ ROWS: list[Row] = [
     Row("scale", "`rmbuild build` serial / `local:2` wall time per MS ILC site (outputs equal)", lambda d: ", ".join(
         f"{k} {v['runs']['serial']['wall_s'] / v['runs']['local:2']['wall_s']:.2f}×" for k, v in d["sites"].items()),
         "", "up to ~1.8"),
+    Row("incremental", "`optimize --incremental` vs full re-run after appending 20 % of a floor: speed-up of the "
+        "optimisation / of the command; landmark error (all, linked walks) and kNN median incremental / full",
+        lambda d: ", ".join(
+            f"{k} {v['speedup_optimize']:.1f}× / {v['speedup_wall']:.1f}×, landmark {v['landmark_ratio']:.2f} "
+            f"({v['landmark_linked_ratio']:.2f}), kNN {v['knn_median_ratio']:.2f}" for k, v in d["floors"].items()),
+        "", "≥ 5×, within 5 %"),
     Row("bench_pdr", "phone PDR own-fit median error per ILC floor", lambda d: ", ".join(
         f"{k} {v['own_fit_median_m']:.2f}" for k, v in d["ilc"].items()), "m"),
     Row("fuzz", "fuzzed inputs ending otherwise than exit 0 / one-line exit 2", lambda d: d["failures"], "",

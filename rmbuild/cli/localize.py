@@ -14,7 +14,8 @@ from rmbuild.localize.registry import describe, localizer_names
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @workspace_option
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False),
-              help="Per-scan positions (map frame) with an uncertainty: .csv or .parquet.")
+              help="Per-scan positions (map frame) with an uncertainty: .csv or .parquet; .geojson (lon/lat points) "
+                   "when the map is georeferenced (building frame and a floor plan with lon/lat).")
 @click.option("--localizer", type=click.Choice(localizer_names()), default=None,
               help=f"Localizer (default: the first of [evaluate] localizers, knn). {describe()}.")
 @click.option("--format", "fmt", type=click.Choice(reader_names()), default=None,

@@ -14,10 +14,13 @@ from rmbuild.cli.view import rerun_option
               help="CSV/Parquet with walk_id, t_s, x_m, y_m: known building-frame positions (position priors).")
 @click.option("--preset", type=click.Choice(["rmbuild", "paper"]), default=None,
               help="Start from rmbuild's defaults or from Gu et al.'s model as published (before --config).")
+@click.option("--incremental", is_flag=True, default=False,
+              help="Place only the walks added with `ingest --append` since the last optimize, against its "
+                   "solution (the old walks keep their poses); much faster than a full run, see docs/api.md.")
 @floor_option
 @rerun_option
 @common_options
-def optimize(workspace, anchors_path, preset, floor, rerun, config_path, force, quiet, verbose):
+def optimize(workspace, anchors_path, preset, incremental, floor, rerun, config_path, force, quiet, verbose):
     """Align all walks of WORKSPACE into one frame (GTSAM: odometry + fuzzy RSS-vicinity factors)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -32,7 +35,7 @@ def optimize(workspace, anchors_path, preset, floor, rerun, config_path, force, 
     with (stage_viewer(rerun, workspace, "optimize", quiet, force) as viewer,
           progress_display(quiet, verbose) as progress):
         r = stage.run(workspace, cfg, anchors_path=anchors_path, progress=progress, viewer=viewer, force=force,
-                      floor=floor)
+                      floor=floor, incremental=incremental)
     if quiet:
         return
     for name in r.get("ran_floors", [None]):
@@ -45,6 +48,10 @@ def _summary(r: dict) -> None:
     from rmbuild.stages.optimize import frame_text, metrics_text
 
     f = r["factors"]
+    inc = r.get("incremental")
+    if inc:
+        click.echo(f"incremental: {inc['new_walks_placed']} of {len(inc['new_walks'])} new walk(s) placed against "
+                   f"the last optimize's {inc['old_walks_held']} walks (kept as they were)")
     click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
                f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "
                f"{r['time_s'].get('stage_total', 0):.1f} s; {frame_text(r)}")

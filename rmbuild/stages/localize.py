@@ -34,7 +34,7 @@ from rmbuild.types import Dataset
 log = logging.getLogger(__name__)
 
 #: output suffix -> table format
-OUTPUT_FORMATS = {".csv": "csv", ".parquet": "parquet"}
+OUTPUT_FORMATS = {".csv": "csv", ".parquet": "parquet", ".geojson": "geojson"}
 
 
 @dataclass
@@ -60,7 +60,8 @@ def run(
 ) -> dict:
     """Localize ``inputs`` against ``workspace``'s map (a building's: the map of ``floor``), write per-scan
     positions to ``out`` (CSV or Parquet by suffix); returns the report (errors under "errors" when the
-    input has ground truth)."""
+    input has ground truth). ``out`` ending in .geojson: a FeatureCollection, when the map is georeferenced
+    (:mod:`rmbuild.stages.localize_geojson`)."""
     from rmbuild.evaluate.localization import error_stats, query_reference_xy
     from rmbuild.localize.apply import localize_query, positions_table
     from rmbuild.localize.base import Query, localizer_class
@@ -73,6 +74,7 @@ def run(
     t0 = time.perf_counter()
     with locked_workspace(workspace, "localize", exclusive=False) as ws:
         rm = _read_map(ws)
+        geo = _georef(ws, rm, out, floor)
         progress.phase("reading the input")
         new = read_input(inputs, fmt, *ingest_configs(ws))
         ds = new.dataset
@@ -90,7 +92,7 @@ def run(
     progress.phase(f"localizing {len(query)} scans with {name}")
     res = localize_query(rm, query, name, cfg)
     table = positions_table(query, res, to_map(ref) if to_map is not None else None)
-    write_table(table, out)
+    write_table(table, out, geo)
     report = {
         "stage": "localize", "workspace": str(ws.root), "inputs": [str(p) for p in inputs], "output": str(out),
         "input_kind": new.kind, "format": new.reader, "walks": len(ds.walks), "scans": len(query),
@@ -184,12 +186,29 @@ def truth_to_map_frame(ws: Workspace, rm: RadioMap) -> tuple[Callable[[np.ndarra
     return (lambda b: (np.asarray(b, dtype=float) - t) @ r), note
 
 
-def write_table(df: pd.DataFrame, out: Path) -> None:
-    """Write ``df`` to ``out`` (CSV or Parquet by suffix) through a temporary file: never half written."""
+def _georef(ws: Workspace, rm: RadioMap, out: Path, floor: str | None):
+    """(georeference, floor name) for a .geojson output (an InputError when the map has none), else None."""
+    if OUTPUT_FORMATS[out.suffix.lower()] != "geojson":
+        return None
+    from rmbuild.stages.localize_geojson import map_georef
+
+    georef, plan_name = map_georef(ws, rm)
+    return georef, floor or plan_name or None
+
+
+def write_table(df: pd.DataFrame, out: Path, geo=None) -> None:
+    """Write ``df`` to ``out`` (CSV, Parquet or, with ``geo`` = (georeference, floor), GeoJSON by suffix)
+    through a temporary file: never half written."""
     from rmbuild.io.atomic import write_bytes_atomic
 
     buf = io.BytesIO()
-    if OUTPUT_FORMATS[out.suffix.lower()] == "parquet":
+    if OUTPUT_FORMATS[out.suffix.lower()] == "geojson":
+        from rmbuild.stages.localize_geojson import geojson_bytes
+
+        if geo is None:
+            raise InputError("GeoJSON is written for localized positions only: write .csv or .parquet", str(out))
+        buf.write(geojson_bytes(df, *geo))
+    elif OUTPUT_FORMATS[out.suffix.lower()] == "parquet":
         df.to_parquet(buf, index=False)
     else:
         buf.write(df.to_csv(index=False, float_format="%.4f").encode("utf-8"))

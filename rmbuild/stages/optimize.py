@@ -46,27 +46,31 @@ def run(
     force: bool = False,
     viewer: Viewer | None = None,
     floor: str | None = None,
+    incremental: bool = False,
 ) -> dict:
     """Run the SLAM back end on the workspace's walks; returns the optimize report (a building's: every
-    floor's, or the one ``floor`` names, :mod:`rmbuild.stages.building`)."""
+    floor's, or the one ``floor`` names, :mod:`rmbuild.stages.building`). ``incremental``: place only the
+    walks appended since the last optimize against its solution (:mod:`rmbuild.slam.incremental`)."""
     floors = floor_workspaces(workspace, floor)
     if floors is not None:
         no_viewer_for_building(viewer, floors)
         if anchors_path is not None and len(floors) > 1:
             raise InputError("--anchors name one floor's walks: pick the floor with --floor NAME")
         return run_floors(workspace, "optimize", floors,
-                          lambda _, p: run(p, cfg, anchors_path, progress, force, viewer))
+                          lambda _, p: run(p, cfg, anchors_path, progress, force, viewer, incremental=incremental))
     with locked_workspace(workspace, "optimize") as ws:
-        return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer))
+        return _run(ws, cfg, anchors_path, ensure_progress(progress), force, ensure_viewer(viewer), incremental)
 
 
 def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
-         viewer: Viewer) -> dict:
+         viewer: Viewer, incremental: bool = False) -> dict:
     from rmbuild.slam import optimize
 
     t0 = time.perf_counter()
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
+    if incremental:
+        return _run_incremental(ws, ds, fp, cfg, anchors_path is not None, progress, viewer, t0)
     anchors = None
     if anchors_path is not None:
         anchors = read_anchors(anchors_path)
@@ -79,6 +83,24 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     has_anchors = anchor_table is not None and len(anchor_table) > 0
     gauge = "anchors" if has_anchors else "floorplan" if plan is not None else "se2"
     _warn_plan_fit(result.stats)
+    return _write(ws, ds, cfg, result, gauge, anchor_table, progress, viewer, t0)
+
+
+def _run_incremental(ws: Workspace, ds, fp, cfg: OptimizeConfig, anchors_given: bool, progress: Progress,
+                     viewer: Viewer, t0: float) -> dict:
+    """``--incremental``: the new walks placed against the last optimize's solution; written like a full run."""
+    from rmbuild.slam.incremental import optimize_incremental
+    from rmbuild.stages.incremental import previous_solution
+
+    prev = previous_solution(ws, anchors_given)
+    result = optimize_incremental(ds, fp, cfg, prev, progress=_progress_adapter(progress, viewer))
+    prev_anchors = ws.read_table("optimize.anchors") if ws.exists("optimize.anchors") else None
+    return _write(ws, ds, cfg, result, prev.report.get("gauge", "se2"), prev_anchors, progress, viewer, t0)
+
+
+def _write(ws: Workspace, ds, cfg: OptimizeConfig, result, gauge: str, anchor_table: pd.DataFrame | None,
+           progress: Progress, viewer: Viewer, t0: float) -> dict:
+    """Trajectory metrics, the report and every optimize output, in one commit."""
     progress.phase("trajectory metrics, writing")
     t_metrics = time.perf_counter()
     raw = trajectory_metrics(ds.poses, ds, align=True)

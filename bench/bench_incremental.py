@@ -1,0 +1,152 @@
+"""`rmbuild optimize --incremental` against a full re-run, on MS ILC floors.
+
+Run from the repo root: ``python -m bench.bench_incremental [--floors site1/F1,site2/B1] [--share 0.2]
+[--scratch DIR]``. Per floor, the traces are split in file-name order (the last ``share`` of them are the
+"new" walks): ``ingest`` the first part, ``optimize``, ``ingest --append`` the rest; the workspace is then
+copied twice and one copy runs ``optimize --incremental``, the other a full ``optimize --force`` (one after
+the other, each through the CLI). Both then run ``export-map`` and ``evaluate --localizer knn``. Recorded:
+the wall time of each optimize command and its stage time, the landmark error against the waypoints
+(optimize's report: all walks, and the linked walks only), the kNN median error on the built map
+(evaluate), linked walk counts and how many new walks were placed. Writes
+``bench/results/incremental.json`` and ``incremental.md``. Data: ``$RMBUILD_DATASETS``, default
+``<repo>/../shared/datasets``; skips cleanly when absent. About two minutes of CPU per floor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from bench.bench_real import DEFAULT_DATASETS
+from bench.common import RESULTS, write_result
+
+#: the issue's targets: the incremental run at least this many times faster, accuracy within this share
+SPEEDUP_TARGET = 5.0
+ACCURACY_TOLERANCE = 0.05
+
+
+def cli(*args: str) -> float:
+    """Run ``rmbuild ARGS -q`` through the CLI; its wall time (s). Raises on failure."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "rmbuild", *args, "-q"], capture_output=True, text=True,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+    if proc.returncode != 0:
+        raise RuntimeError(f"rmbuild {' '.join(args)}: {proc.stderr.strip()[-400:]}")
+    return time.perf_counter() - t0
+
+
+def split_inputs(src: Path, scratch: Path, share: float) -> tuple[Path, Path, int, int]:
+    """Symlink the floor's traces into ``old/`` and ``new/`` (the last ``share`` in file-name order)."""
+    files = sorted(src.glob("*.txt*"))
+    n_new = max(1, round(share * len(files)))
+    old, new = scratch / "old", scratch / "new"
+    for d, part in ((old, files[:-n_new]), (new, files[-n_new:])):
+        d.mkdir(parents=True)
+        for f in part:
+            (d / f.name).symlink_to(f)
+    return old, new, len(files) - n_new, n_new
+
+
+def run_floor(src: Path, scratch: Path, share: float) -> dict:
+    if scratch.exists():
+        shutil.rmtree(scratch)
+    old, new, n_old, n_new = split_inputs(src, scratch, share)
+    base = scratch / "base"
+    cli("ingest", str(old), "-w", str(base), "--format", "msft-ilc")
+    t_first = cli("optimize", "-w", str(base))
+    cli("ingest", "--append", str(new), "-w", str(base))
+    runs: dict = {}
+    for name, args in (("incremental", ["--incremental"]), ("full", ["--force"])):
+        ws = scratch / name
+        shutil.copytree(base, ws, symlinks=True)
+        load0 = os.getloadavg()[0]
+        wall = cli("optimize", "-w", str(ws), *args)
+        cli("export-map", "-w", str(ws))
+        cli("evaluate", "-w", str(ws), "--localizer", "knn")
+        opt = json.loads((ws / "optimize" / "report.json").read_text())
+        ev = json.loads((ws / "evaluate" / "report.json").read_text())
+        o = opt.get("optimized") or {}
+        inc = opt.get("incremental") or {}
+        runs[name] = {
+            "wall_s": round(wall, 2), "stage_s": opt["time_s"].get("stage_total"),
+            "optimize_s": opt["time_s"].get("total"), "load_average_before": load0,
+            "landmark_error_m": (o.get("landmark_error_m") or {}).get("mean"),
+            "landmark_error_linked_m": (o.get("landmark_error_fitted_walks_m") or {}).get("mean"),
+            "landmark_fixes_linked": (o.get("landmark_error_fitted_walks_m") or {}).get("n"),
+            "knn_median_m": ev["maps"]["built"]["knn"]["median"], "knn_n": ev["maps"]["built"]["knn"]["n"],
+            "linked_walks": opt.get("linked_walks"), "walks": opt.get("walks"),
+            "new_walks_placed": inc.get("new_walks_placed"),
+        }
+    inc, full = runs["incremental"], runs["full"]
+    return {"walks_old": n_old, "walks_new": n_new, "first_optimize_wall_s": round(t_first, 2), "runs": runs,
+            "speedup_wall": round(full["wall_s"] / inc["wall_s"], 2),
+            "speedup_optimize": round(full["optimize_s"] / inc["optimize_s"], 2),
+            "landmark_ratio": _ratio(inc["landmark_error_m"], full["landmark_error_m"]),
+            "landmark_linked_ratio": _ratio(inc["landmark_error_linked_m"], full["landmark_error_linked_m"]),
+            "knn_median_ratio": _ratio(inc["knn_median_m"], full["knn_median_m"])}
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return round(a / b, 3) if a is not None and b else None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--floors", default="site1/F1,site2/B1")
+    ap.add_argument("--share", type=float, default=0.2)
+    ap.add_argument("--scratch", type=Path, default=Path("/tmp/rmbuild-bench-incremental"))
+    args = ap.parse_args()
+    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)) / "msft-ilc20" / "data"
+    if not root.is_dir():
+        print(f"skipped: {root} absent")
+        return
+    result: dict = {"share_new": args.share, "speedup_target": SPEEDUP_TARGET,
+                    "accuracy_tolerance": ACCURACY_TOLERANCE, "floors": {}}
+    for floor in args.floors.split(","):
+        src = root / floor / "path_data_files"
+        try:
+            result["floors"][floor] = run_floor(src, args.scratch / floor.replace("/", "-"), args.share)
+        except RuntimeError as e:
+            result["floors"][floor] = {"error": str(e)}
+    write_result("incremental", result)
+    (RESULTS / "incremental.md").write_text(markdown(result))
+    print(markdown(result))
+
+
+def _f(v: float | None, fmt: str = ".2f") -> str:
+    return "" if v is None else format(v, fmt)
+
+
+def markdown(result: dict) -> str:
+    lines = ["# `optimize --incremental` vs a full re-run (`python -m bench.bench_incremental`)", "",
+             f"The last {result['share_new']:.0%} of a floor's traces appended (`ingest --append`) to a workspace "
+             "optimised on the rest; the same workspace then optimised incrementally and in full. Landmark "
+             "error: optimize's report against the waypoints (mean, m; all walks / linked walks only); kNN: "
+             "`evaluate --localizer knn`, median error (m) on the built map. Targets: "
+             f"≥ {result['speedup_target']:g}× faster, accuracy within {result['accuracy_tolerance']:.0%}.", "",
+             "| floor | walks old + new | optimize wall s full / incr (ratio) | optimize core s full / incr "
+             "(ratio) | landmark m full / incr | linked-walk landmark m full / incr | kNN median m full / incr | "
+             "linked walks full / incr (new placed) |", "|---|---|---|---|---|---|---|---|"]
+    for floor, r in result["floors"].items():
+        if "error" in r:
+            lines.append(f"| {floor} | {r['error']} | | | | | | |")
+            continue
+        f, i = r["runs"]["full"], r["runs"]["incremental"]
+        lines.append(
+            f"| {floor} | {r['walks_old']} + {r['walks_new']} | {f['wall_s']:.1f} / {i['wall_s']:.1f} "
+            f"({r['speedup_wall']:.1f}×) | {_f(f['optimize_s'], '.1f')} / {_f(i['optimize_s'], '.1f')} "
+            f"({r['speedup_optimize']:.1f}×) | {_f(f['landmark_error_m'])} / {_f(i['landmark_error_m'])} | "
+            f"{_f(f['landmark_error_linked_m'])} / {_f(i['landmark_error_linked_m'])} | "
+            f"{_f(f['knn_median_m'])} / {_f(i['knn_median_m'])} | {f['linked_walks']} / {i['linked_walks']} "
+            f"({i['new_walks_placed']} of {r['walks_new']}) |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()

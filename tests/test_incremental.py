@@ -1,0 +1,166 @@
+"""`rmbuild optimize --incremental`: walks appended after an optimize placed against its solution; and the
+GeoJSON output of `rmbuild localize`."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from cli_util import run_cli
+
+from rmbuild.errors import InputError
+from rmbuild.io.workspace import Workspace
+
+pytest.importorskip("gtsam")
+
+
+def _split(src: Path, dst: Path, walks: set[str]) -> Path:
+    """The part of the simulated input at ``src`` that belongs to ``walks``."""
+    for f in sorted(p for p in src.rglob("*") if p.is_file()):
+        out = dst / f.relative_to(src)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if f.suffix != ".csv":
+            shutil.copy(f, out)
+            continue
+        df = pd.read_csv(f, dtype={"walk_id": str})
+        (df[df["walk_id"].isin(walks)] if "walk_id" in df else df).to_csv(out, index=False)
+    return dst
+
+
+@pytest.fixture(scope="module")
+def venue(tmp_path_factory) -> dict:
+    """The small synthetic venue split 80/20 in walk order: ``base`` (old part optimised, new part appended,
+    not optimised again), ``inc`` (a copy optimised with --incremental), ``full`` (a copy optimised in full)."""
+    from rmbuild.cli import main
+    from rmbuild.config.simulate import preset_config
+    from rmbuild.stages import simulate
+
+    root = tmp_path_factory.mktemp("incremental")
+    simulate.run(root / "all", preset_config("tiny", 5))
+    ids = pd.read_csv(root / "all" / "walks.csv", dtype={"walk_id": str})["walk_id"].tolist()
+    k = int(len(ids) * 0.8)
+    old, new = _split(root / "all", root / "old", set(ids[:k])), _split(root / "all", root / "new", set(ids[k:]))
+
+    def run(*args) -> None:
+        with pytest.raises(SystemExit) as e:
+            main([str(a) for a in args])
+        assert e.value.code == 0, args
+
+    base = root / "base"
+    run("ingest", old, "-w", base, "-q")
+    run("optimize", "-w", base, "-q")
+    run("ingest", "--append", new, "-w", base, "-q")
+    shutil.copytree(base, root / "inc")
+    shutil.copytree(base, root / "full")
+    run("optimize", "-w", root / "inc", "--incremental", "-q")
+    run("optimize", "-w", root / "full", "--force", "-q")
+    return {"root": root, "base": base, "inc": root / "inc", "full": root / "full", "old_ids": ids[:k],
+            "new_ids": ids[k:]}
+
+
+def _report(ws: Path) -> dict:
+    return json.loads((ws / "optimize" / "report.json").read_text())
+
+
+def test_incremental_places_the_new_walks_about_as_well_as_a_full_run(venue: dict) -> None:
+    inc, full = _report(venue["inc"]), _report(venue["full"])
+    assert inc["incremental"]["new_walks"] == venue["new_ids"]
+    assert inc["incremental"]["new_walks_placed"] == len(venue["new_ids"])
+    assert inc["linked_walks"] >= full["linked_walks"] - 1
+    a_inc, a_full = inc["optimized"]["ate_m"]["rmse"], full["optimized"]["ate_m"]["rmse"]
+    assert a_inc < inc["raw"]["ate_m"]["rmse"] / 2  # far better than dead reckoning
+    assert a_inc < 1.15 * a_full + 0.2, (a_inc, a_full)
+    walks = Workspace.open(venue["inc"]).read_table("optimize.walks")
+    assert walks.loc[walks["added"], "walk_id"].tolist() == venue["new_ids"]
+    assert "incremental" not in full
+
+
+def test_incremental_keeps_the_old_solution_and_export_map_runs(venue: dict, capsys) -> None:
+    before = Workspace.open(venue["base"]).read_table("optimize.poses")
+    after = Workspace.open(venue["inc"]).read_table("optimize.poses")
+    n_old = len(before)
+    held = before["linked"].to_numpy()
+    assert np.allclose(after[["x_m", "y_m", "heading_rad"]].to_numpy()[:n_old][held],
+                       before[["x_m", "y_m", "heading_rad"]].to_numpy()[held])
+    assert after["linked"].to_numpy()[n_old:].all()
+    r = run_cli(capsys, "export-map", "-w", venue["inc"], "-q")
+    assert r.code == 0, r.err
+
+
+def test_incremental_refuses_bad_use(venue: dict, capsys, tmp_path: Path) -> None:
+    # nothing appended since the last optimize
+    r = run_cli(capsys, "optimize", "-w", venue["inc"], "--incremental", "-q")
+    assert r.code == 2 and "nothing to add" in r.err and len(r.err.strip().splitlines()) == 1
+    # no optimize at all
+    bare = tmp_path / "bare"
+    assert run_cli(capsys, "ingest", venue["root"] / "old", "-w", bare, "-q").code == 0
+    r = run_cli(capsys, "optimize", "-w", bare, "--incremental", "-q")
+    assert r.code == 2 and "needs an earlier optimize" in r.err and "Traceback" not in r.err
+    # anchors name a frame: a full run's business
+    anchors = tmp_path / "a.csv"
+    anchors.write_text("walk_id,t_s,x_m,y_m\n")
+    r = run_cli(capsys, "optimize", "-w", venue["base"], "--incremental", "--anchors", anchors, "-q")
+    assert r.code == 2 and "--anchors" in r.err
+
+
+def test_incremental_refuses_a_solution_of_other_walks(venue: dict) -> None:
+    from rmbuild.config import OptimizeConfig
+    from rmbuild.slam.incremental import PreviousSolution, optimize_incremental
+
+    ws = Workspace.open(venue["base"])
+    ds, fp = ws.read_dataset(), ws.read_fingerprints()
+    poses = ws.read_table("optimize.poses")
+    prev = PreviousSolution(poses, ws.read_table("optimize.walks"), ws.read_table("optimize.pairs"), {})
+    shifted = PreviousSolution(poses.assign(t_s=poses["t_s"] + 1.0), prev.walks, prev.pairs, {})
+    with pytest.raises(InputError, match="other walks"):
+        optimize_incremental(ds, fp, OptimizeConfig(), shifted)
+    every = PreviousSolution(Workspace.open(venue["full"]).read_table("optimize.poses"), prev.walks, prev.pairs, {})
+    with pytest.raises(InputError, match="no new walks"):
+        optimize_incremental(ds, fp, OptimizeConfig(), every)
+
+
+# ---------------------------------------------------------------------------------------- localize GeoJSON
+def test_geojson_features_carry_lonlat_and_the_scan_properties() -> None:
+    from rmbuild.floorplan import Georef
+    from rmbuild.stages.localize_geojson import feature_collection
+
+    table = pd.DataFrame({"walk_id": ["a", "a", "b"], "t_s": [1.0, 2.0, 3.0], "x_m": [0.0, 100.0, np.nan],
+                          "y_m": [0.0, 0.0, np.nan], "uncertainty_m": [2.0, 3.0, np.nan], "n_aps": [5, 6, 0]})
+    fc = feature_collection(table, Georef("enu", 2.35, 48.85), "F1")
+    assert fc["type"] == "FeatureCollection" and len(fc["features"]) == 3
+    f0, f1, f2 = fc["features"]
+    assert np.allclose(f0["geometry"]["coordinates"], [2.35, 48.85], atol=1e-7)
+    # 100 m east at 48.85 N: 100 / (6378137 cos(lat)) rad of longitude, latitude unchanged
+    dlon = np.degrees(100.0 / (6378137.0 * np.cos(np.radians(48.85))))
+    assert f1["geometry"]["coordinates"][0] - 2.35 == pytest.approx(dlon, rel=0.01)
+    assert f1["geometry"]["coordinates"][1] == pytest.approx(48.85, abs=1e-5)
+    assert f1["properties"] == {"walk": "a", "time": 2.0, "uncertainty": 3.0, "floor": "F1", "x_m": 100.0, "y_m": 0.0}
+    assert f2["geometry"] is None and f2["properties"]["uncertainty"] is None
+    json.dumps(fc, allow_nan=False)  # valid JSON: no NaN
+
+
+def test_localize_geojson_needs_a_georeferenced_map(venue: dict, capsys, tmp_path: Path, monkeypatch) -> None:
+    ws = venue["inc"]
+    if not (ws / "map").exists():
+        assert run_cli(capsys, "export-map", "-w", ws, "-q").code == 0
+    out = tmp_path / "pos.geojson"
+    r = run_cli(capsys, "localize", venue["root"] / "new", "-w", ws, "-o", out, "-q")
+    assert r.code == 2 and "georeferenced" in r.err and len(r.err.strip().splitlines()) == 1
+    assert not out.exists()
+    # with a georeference (here patched in), the same call writes one point per scan
+    from rmbuild.config import EvaluateConfig
+    from rmbuild.floorplan import Georef
+    from rmbuild.stages import localize, localize_geojson
+
+    monkeypatch.setattr(localize_geojson, "map_georef", lambda ws, rm: (Georef("enu", 2.35, 48.85), "plan"))
+    rep = localize.run(ws, [venue["root"] / "new"], out, EvaluateConfig())
+    fc = json.loads(out.read_text())
+    assert len(fc["features"]) == rep["scans"] > 0
+    pts = np.array([f["geometry"]["coordinates"] for f in fc["features"] if f["geometry"]])
+    assert np.all(np.abs(pts - [2.35, 48.85]).max(axis=0) < 0.01)  # within a kilometre of the origin
+    assert {f["properties"]["floor"] for f in fc["features"]} == {"plan"}
+    assert {f["properties"]["walk"] for f in fc["features"]} == set(venue["new_ids"])
