@@ -203,3 +203,40 @@ def test_short_walk_keeps_compass_rotation_in_refinement(monkeypatch, short_walk
         assert abs(got) < 1.0
     else:
         assert got > 5.0
+
+
+class _FakeRss:
+    """RSS distance growing with the true distance between scans (dB): near pairs ~21 dB, 40 m apart ~45 dB."""
+
+    def __init__(self, true_xy):
+        self.xy = true_xy
+
+    def block(self, rows, cols):
+        d = np.linalg.norm(self.xy[rows][:, None] - self.xy[cols][None], axis=2)
+        return (20.0 + 0.6 * d).astype(np.float32), np.full(d.shape, 10.0)
+
+
+def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
+    from types import SimpleNamespace
+
+    from rmbuild.slam.placement.rfcheck import refute
+    from rmbuild.slam.rfmodel import RFModel
+
+    per = 30
+    line = np.c_[np.linspace(0, 29, per), np.zeros(per)]
+    raw = np.vstack([line] * 4)
+    walk_of = np.repeat(np.arange(4), per)
+    walks = walk_set(np.c_[raw, np.zeros(len(raw))], walk_of)
+    # truth: walks 0, 1 on one corridor; 2 and 3 on another, 40 m away; placement lays all four on the first
+    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0]], float)
+    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0]], float)
+    nodes = np.arange(len(raw))
+    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes)), row_node=nodes, min_common=3,
+                          rf=RFModel(22.0, 3.0, 32.0, 4.0))
+    pl = Placement(placed_T, np.zeros(4, np.int64), 0, np.zeros(4, bool), np.array([""] * 4, dtype=object))
+    assert sorted(refute(pl, walks, sim)) == [2, 3]
+    assert list(pl.component[:2]) == [0, 0] and pl.component[2] > 0 and pl.component[3] > 0
+    assert list(pl.method[2:]) == ["refuted", "refuted"]
+    # placed where they belong, nothing is refuted
+    pl = Placement(true_T.copy(), np.zeros(4, np.int64), 0, np.zeros(4, bool), np.array([""] * 4, dtype=object))
+    assert refute(pl, walks, sim) == []

@@ -39,33 +39,34 @@ class OverlapEvidence:
 # and IPIN 2023 -2 (docs/optimize.md, "RF check"): refuted walks there had 1.3-2.2x the others' error.
 MIN_OVERLAP_LOG_LR = -0.5
 MIN_OVERLAP_SCANS = 5
-# passes of the check at most (each after removing the walks the last one refuted)
-MAX_REFUTE_PASSES = 5
+# share of the reference component's walks the check may refute at most (a safeguard: when most of a map
+# looks inconsistent the RF model, not the placement, is the likelier fault)
+MAX_REFUTED_SHARE = 0.5
 
 
 def refute(placement, walks: WalkSet, sim) -> list[int]:
-    """Walks of the reference component whose placement the RF check contradicts: each is moved into a
-    component of its own (unlinked, kept where it is); returns them. Repeated until none is refuted, as a
-    walk placed onto a refuted one may agree with it and with nothing else. The reference walk is kept."""
+    """Walks of the reference component whose placement the RF check contradicts, worst first: each is moved
+    into a component of its own (unlinked, kept where it is) and the rest judged again without it, as walks
+    placed onto a wrong one agree with it and a right walk can be outvoted by wrong ones laid over it.
+    Returns them in that order. The reference walk is kept."""
     check = OverlapCheck(walks, sim)
     comp = placement.component
     xy = walks.world_xy(placement.world_T_walk, sim.row_node)
     out: list[int] = []
-    for _ in range(MAX_REFUTE_PASSES):
-        bad: list[int] = []
+    while len(out) < MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1):
+        worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
         for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
             if w == placement.reference:
                 continue
             others = np.flatnonzero((comp[check.row_walk] == 0) & (check.row_walk != w))
             ev = check.evidence(w, placement.world_T_walk[w], others, xy[others])
-            if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < MIN_OVERLAP_LOG_LR:
-                bad.append(w)
-        for w in bad:
-            comp[w] = int(comp.max()) + 1
-            placement.method[w] = "refuted"
-        out += bad
-        if not bad:
+            if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
+                worst, worst_llr = w, ev.mean_log_lr
+        if worst < 0:
             break
+        comp[worst] = int(comp.max()) + 1
+        placement.method[worst] = "refuted"
+        out.append(worst)
     return out
 
 
