@@ -206,14 +206,17 @@ def test_short_walk_keeps_compass_rotation_in_refinement(monkeypatch, short_walk
 
 
 class _FakeRss:
-    """RSS distance growing with the true distance between scans (dB): near pairs ~21 dB, 40 m apart ~45 dB."""
+    """RSS distance growing with the true distance between scans (dB): near pairs ~21 dB, 40 m apart ~45 dB;
+    scans of the walk ``loud`` (another phone's gain) are ``gain_db`` further from everything."""
 
-    def __init__(self, true_xy):
-        self.xy = true_xy
+    def __init__(self, true_xy, walk_of, loud=-1, gain_db=0.0):
+        self.xy, self.walk_of, self.loud, self.gain = true_xy, walk_of, loud, gain_db
 
     def block(self, rows, cols):
         d = np.linalg.norm(self.xy[rows][:, None] - self.xy[cols][None], axis=2)
-        return (20.0 + 0.6 * d).astype(np.float32), np.full(d.shape, 10.0)
+        loud = (self.walk_of[rows] == self.loud)[:, None] | (self.walk_of[cols] == self.loud)[None, :]
+        d = d * 0.6 + 20.0 + self.gain * loud
+        return d.astype(np.float32), np.full(d.shape, 10.0)
 
 
 def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
@@ -224,19 +227,22 @@ def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
 
     per = 30
     line = np.c_[np.linspace(0, 29, per), np.zeros(per)]
-    raw = np.vstack([line] * 4)
-    walk_of = np.repeat(np.arange(4), per)
+    raw = np.vstack([line] * 5)
+    walk_of = np.repeat(np.arange(5), per)
     walks = walk_set(np.c_[raw, np.zeros(len(raw))], walk_of)
-    # truth: walks 0, 1 on one corridor; 2 and 3 on another, 40 m away; placement lays all four on the first
-    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0]], float)
-    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0]], float)
+    # truth: walks 0, 1, 4 on one corridor; 2 and 3 on another, 40 m away; placement lays all on the first.
+    # Walk 4's phone reads 8 dB off: far from everything by RSS distance, yet placed right.
+    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0], [0, -1, 0]], float)
+    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0], [0, -1, 0]], float)
     nodes = np.arange(len(raw))
-    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes)), row_node=nodes, min_common=3,
-                          rf=RFModel(22.0, 3.0, 32.0, 4.0))
-    pl = Placement(placed_T, np.zeros(4, np.int64), 0, np.zeros(4, bool), np.array([""] * 4, dtype=object))
+    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes), walk_of, loud=4, gain_db=8.0), row_node=nodes,
+                          min_common=3, rf=RFModel(22.0, 3.0, 32.0, 4.0))
+
+    def placement(T):
+        return Placement(T.copy(), np.zeros(5, np.int64), 0, np.zeros(5, bool), np.array([""] * 5, dtype=object))
+
+    pl = placement(placed_T)
     assert sorted(refute(pl, walks, sim)) == [2, 3]
-    assert list(pl.component[:2]) == [0, 0] and pl.component[2] > 0 and pl.component[3] > 0
-    assert list(pl.method[2:]) == ["refuted", "refuted"]
-    # placed where they belong, nothing is refuted
-    pl = Placement(true_T.copy(), np.zeros(4, np.int64), 0, np.zeros(4, bool), np.array([""] * 4, dtype=object))
-    assert refute(pl, walks, sim) == []
+    assert list(pl.component[[0, 1, 4]]) == [0, 0, 0] and pl.component[2] > 0 and pl.component[3] > 0
+    assert list(pl.method[2:4]) == ["refuted", "refuted"]
+    assert refute(placement(true_T), walks, sim) == []  # placed where they belong: nothing refuted

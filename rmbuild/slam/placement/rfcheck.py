@@ -6,6 +6,8 @@ scans, the radio differs. For each of the walk's scans with placed scans within 
 distance (:data:`rmbuild.slam.rfmodel.NEAR_M`) under the fit, the median over those neighbours of the RF
 model's log likelihood ratio (near vs far) says whether the overlap looks near; the check is the mean of
 these over the overlapping scans. Calibrated per data set by the RF model, it means the same in every venue.
+A phone with another gain looks far from everything; each walk's distances are reduced first by how much
+further its best matches in other walks are than the median walk's.
 
 :func:`refute` applies it once placement is done, before the solve: each linked walk against the rest of the
 reference component; a walk the overlap contradicts is left unlinked rather than pulled to a wrong place.
@@ -20,7 +22,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rmbuild import geometry
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.rfmodel import NEAR_M
 
@@ -44,14 +45,15 @@ MIN_OVERLAP_SCANS = 5
 MAX_REFUTED_SHARE = 0.5
 
 
-def refute(placement, walks: WalkSet, sim) -> list[int]:
+def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
     """Walks of the reference component whose placement the RF check contradicts, worst first: each is moved
     into a component of its own (unlinked, kept where it is) and the rest judged again without it, as walks
     placed onto a wrong one agree with it and a right walk can be outvoted by wrong ones laid over it.
-    Returns them in that order. The reference walk is kept."""
+    Returns them in that order. The reference walk is kept. ``row_xy``: each fingerprint row's position
+    (default: where the placement puts it)."""
     check = OverlapCheck(walks, sim)
     comp = placement.component
-    xy = walks.world_xy(placement.world_T_walk, sim.row_node)
+    xy = walks.world_xy(placement.world_T_walk, sim.row_node) if row_xy is None else row_xy
     out: list[int] = []
     while len(out) < MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1):
         worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
@@ -59,7 +61,7 @@ def refute(placement, walks: WalkSet, sim) -> list[int]:
             if w == placement.reference:
                 continue
             others = np.flatnonzero((comp[check.row_walk] == 0) & (check.row_walk != w))
-            ev = check.evidence(w, placement.world_T_walk[w], others, xy[others])
+            ev = check.evidence(w, xy[check.rows_of[w]], others, xy[others])
             if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
                 worst, worst_llr = w, ev.mean_log_lr
         if worst < 0:
@@ -77,14 +79,27 @@ class OverlapCheck:
         self.walks, self.sim = walks, sim
         self.row_walk = walks.walk_of[sim.row_node]
         self.rows_of = [np.flatnonzero(self.row_walk == w) for w in range(walks.n_walks)]
+        self.offset_db = self._walk_offsets()
 
-    def evidence(self, w: int, t: np.ndarray, placed_rows: np.ndarray, placed_xy: np.ndarray) -> OverlapEvidence:
-        """Walk ``w`` under world_T_walk ``t`` against the placed scans ``placed_rows`` at ``placed_xy``."""
+    def _walk_offsets(self) -> np.ndarray:
+        """Per walk, how much further (dB) its scans' best matches in other walks are than the data set's
+        typical walk's: a phone with another gain looks far from everything, wherever it is placed."""
+        best = np.full(self.walks.n_walks, np.nan)
+        for w, rw in enumerate(self.rows_of):
+            others = np.flatnonzero(self.row_walk != w)
+            if len(rw) and len(others):
+                d, common = self.sim.rss.block(rw, others)
+                dmin = np.where(common >= self.sim.min_common, d, np.inf).min(axis=1)
+                best[w] = float(np.median(dmin)) if np.isfinite(dmin).any() else np.nan
+        off = best - np.nanmedian(best) if np.isfinite(best).any() else best
+        return np.where(np.isfinite(off), np.maximum(off, 0.0), 0.0)
+
+    def evidence(self, w: int, xy: np.ndarray, placed_rows: np.ndarray, placed_xy: np.ndarray) -> OverlapEvidence:
+        """Walk ``w`` with its scans at ``xy`` (rows ``rows_of[w]``) against the placed scans ``placed_rows`` at
+        ``placed_xy``."""
         rw = self.rows_of[w]
         if not len(rw) or not len(placed_rows):
             return OverlapEvidence(0, float("nan"))
-        own = self.walks.raw[self.sim.row_node[rw], :2]
-        xy = own @ geometry.rot(float(t[2])).T + t[:2]
         hits = cKDTree(placed_xy).query_ball_point(xy, NEAR_M)
         has = np.array([len(h) > 0 for h in hits])
         if not has.any():
@@ -93,7 +108,7 @@ class OverlapCheck:
         near = np.linalg.norm(xy[has][:, None, :] - placed_xy[cols][None, :, :], axis=2) < NEAR_M
         d, common = self.sim.rss.block(rw[has], placed_rows[cols])
         ok = near & (common >= self.sim.min_common)
-        llr = np.where(ok, self.sim.rf.log_lr(np.where(ok, d, 0.0)), np.nan)
+        llr = np.where(ok, self.sim.rf.log_lr(np.where(ok, d - self.offset_db[w], 0.0)), np.nan)
         seen = ok.any(axis=1)
         if not seen.any():
             return OverlapEvidence(0, float("nan"))
