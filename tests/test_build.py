@@ -272,3 +272,33 @@ def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
     log.warning("after")
     assert warnings == ["plan fit doubtful"]
     assert [r.getMessage() for r in caplog.records] == ["phase done", "after"]
+
+
+def _pid_after_warm_up() -> dict:
+    import os
+    import sys
+
+    return {"ok": True, "pid": os.getpid(), "warm": "rmbuild.stages.optimize" in sys.modules}
+
+
+def test_a_local_cluster_started_early_is_warmed_and_fitted_to_the_floors() -> None:
+    """`build` starts a local cluster before it knows the floors: its workers import the floor stages as
+    they start, and a cluster of the default size lets its extra workers go once the floors are known."""
+    import time
+
+    from rmbuild.stages.dask_run import executor
+    from rmbuild.stages.floor_task import import_floor_modules
+
+    with executor(parse_scheduler("local:2"), None, warm=import_floor_modules) as run:
+        out = run(_pid_after_warm_up, {"a": (), "b": ()}, None)
+        assert all(r["warm"] for r in out.values())
+    with executor(parse_scheduler("local"), None) as run:
+        client = run.client  # type: ignore[attr-defined]
+        if len(client.scheduler_info()["workers"]) < 2:
+            pytest.skip("one core: nothing to let go")
+        run.fit(1)
+        deadline = time.monotonic() + 30
+        while len(client.scheduler_info()["workers"]) > 1 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert len(client.scheduler_info()["workers"]) == 1
+        assert run(_pid_after_warm_up, {"a": ()}, None)["a"]["ok"]
