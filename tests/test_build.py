@@ -111,12 +111,64 @@ def test_a_failed_floor_is_reported_and_the_other_completes(serial_ws, runs) -> 
     assert rep["ran_floors"] == ["F1"]
 
 
-def test_without_force_an_existing_workspace_is_kept(serial_ws, runs, capsys) -> None:
-    ws = serial_ws
+def test_without_force_a_workspace_not_made_by_build_is_kept(serial_ws, runs, tmp_path, capsys) -> None:
+    ws = tmp_path / "ws"
+    shutil.copytree(serial_ws, ws)
+    Workspace(ws).path("build.state").unlink()  # as if made by `rmbuild ingest` and the stages one by one
     before = (ws / "manifest.json").read_text()
     res = run_cli(capsys, "build", runs["input"], "-w", ws, "--scheduler", "serial")
     assert res.code == 2 and "--force" in res.err
     assert (ws / "manifest.json").read_text() == before
+
+
+def _split_by_floor(folder: Path, tables: dict[str, pd.DataFrame]) -> list[Path]:
+    """The input of a building as one folder per floor (F1: walks 0-1, F2: walks 2-3)."""
+    from conftest import write_tables
+
+    tables["walks"]["floor"] = ["F1", "F1", "F2", "F2"]
+    out = []
+    for floor in ("F1", "F2"):
+        ids = set(tables["walks"].loc[tables["walks"]["floor"] == floor, "walk_id"])
+        out.append(write_tables({k: v[v["walk_id"].isin(ids)] for k, v in tables.items()}, folder / floor))
+    return out
+
+
+def _records(ws: Path) -> dict[str, str]:
+    """Each floor's optimize record (its completion time and checksums): unchanged when not re-run."""
+    return {n: json.dumps(Workspace(p).record("optimize")) for n, p in (building_floors(ws) or {}).items()}
+
+
+def test_a_rerun_redoes_only_what_changed(tmp_path: Path) -> None:
+    from conftest import make_input_tables
+
+    from rmbuild.stages.build_state import floor_is_current, read_state
+
+    inputs = _split_by_floor(tmp_path / "in", make_input_tables(n_walks=4))
+    ws, cfgs = tmp_path / "ws", _configs("serial")
+    first = build.run(inputs, ws, cfgs)
+    assert first["ingested"] and not first["failed"] and set(first["floors"]) == {"F1", "F2"}
+    recs, page = _records(ws), building_report_path(ws, "optimize").read_text()
+
+    again = build.run(inputs, ws, cfgs)  # same inputs, same config: nothing is done
+    assert not again["ingested"] and all(f.get("reused") for f in again["floors"].values())
+    assert _records(ws) == recs and building_report_path(ws, "optimize").read_text() == page
+    state = read_state(ws) or {}
+    entry = state["floors"]["F1"]
+    path = (building_floors(ws) or {})["F1"]
+    assert floor_is_current(path, entry["configs"], entry)
+    assert not floor_is_current(path, {**entry["configs"], "map": entry["configs"]["map"] + "\n# changed"}, entry)
+
+    wifi = inputs[1] / "wifi.csv"  # one reading of floor F2 changes: F2 alone runs again
+    table = pd.read_csv(wifi)
+    table.loc[3, "rssi_dbm"] -= 2.0
+    table.to_csv(wifi, index=False)
+    third = build.run(inputs, ws, cfgs)
+    assert third["ingested"] and not third["failed"]
+    assert third["floors"]["F1"].get("reused") and not third["floors"]["F2"].get("reused")
+    now = _records(ws)
+    assert now["F1"] == recs["F1"] and now["F2"] != recs["F2"]
+    assert not Workspace.open((building_floors(ws) or {})["F1"]).verify("optimize")
+    assert not list(tmp_path.glob(".ws.keep-*"))  # the floors set aside during the ingest are gone
 
 
 def test_scheduler_values() -> None:
@@ -220,3 +272,33 @@ def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
     log.warning("after")
     assert warnings == ["plan fit doubtful"]
     assert [r.getMessage() for r in caplog.records] == ["phase done", "after"]
+
+
+def _pid_after_warm_up() -> dict:
+    import os
+    import sys
+
+    return {"ok": True, "pid": os.getpid(), "warm": "rmbuild.stages.optimize" in sys.modules}
+
+
+def test_a_local_cluster_started_early_is_warmed_and_fitted_to_the_floors() -> None:
+    """`build` starts a local cluster before it knows the floors: its workers import the floor stages as
+    they start, and a cluster of the default size lets its extra workers go once the floors are known."""
+    import time
+
+    from rmbuild.stages.dask_run import executor
+    from rmbuild.stages.floor_task import import_floor_modules
+
+    with executor(parse_scheduler("local:2"), None, warm=import_floor_modules) as run:
+        out = run(_pid_after_warm_up, {"a": (), "b": ()}, None)
+        assert all(r["warm"] for r in out.values())
+    with executor(parse_scheduler("local"), None) as run:
+        client = run.client  # type: ignore[attr-defined]
+        if len(client.scheduler_info()["workers"]) < 2:
+            pytest.skip("one core: nothing to let go")
+        run.fit(1)
+        deadline = time.monotonic() + 30
+        while len(client.scheduler_info()["workers"]) > 1 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert len(client.scheduler_info()["workers"]) == 1
+        assert run(_pid_after_warm_up, {"a": ()}, None)["a"]["ok"]

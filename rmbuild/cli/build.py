@@ -28,7 +28,8 @@ from rmbuild.io.formats import reader_names
 def build(inputs, workspace, venues_path, out_dir, fmt, floorplan, scheduler, config_path, force, quiet, verbose):
     """Run the whole pipeline on INPUTS into -w WORKSPACE (or on every venue of --venues into -o OUT_DIR):
     ingest, then per floor optimize, export-map, evaluate (when there is ground truth) and report, the floors
-    as parallel tasks; then the building's reports."""
+    as parallel tasks; then the building's reports. Run again on a workspace it made, it redoes only what
+    changed (inputs, config); --force redoes everything."""
     start(verbose, quiet)
     _check_usage(inputs, workspace, venues_path, out_dir, fmt, floorplan)
     from rmbuild.cli.progress import progress_display
@@ -74,8 +75,8 @@ def _check_usage(inputs, workspace, venues_path, out_dir, fmt, floorplan) -> Non
 def _summary(r: dict, workspace: str, indent: str = "") -> None:
     ing = r["ingest"]
     b = ing.get("building") or ing
-    click.echo(f"{indent}ingested {b['walks']} walks, {b['poses']} poses"
-               + (f" on {len(r['floors'])} floors" if r["building"] else ""))
+    click.echo(f"{indent}{'ingested' if r.get('ingested', True) else 'inputs unchanged, not ingested again:'} "
+               f"{b['walks']} walks, {b['poses']} poses" + (f" on {len(r['floors'])} floors" if r["building"] else ""))
     for name, f in r["floors"].items():
         head = f"floor {name}: " if r["building"] else ""
         click.echo(f"{indent}{head}" + (_floor_line(f) if f.get("ok") else f"FAILED: {f['error']}"))
@@ -108,4 +109,6 @@ def _floor_line(f: dict) -> str:
             parts.append(f"built map {loc} mean error {built[loc]:.2f} m")
     else:
         parts.append(f"not evaluated: {f['evaluate_skipped']}")
+    if f.get("reused"):
+        return ", ".join(parts) + " (unchanged since the last build: not re-run)"
     return ", ".join(parts) + f" ({f['time_s']:.1f} s, peak {f['peak_rss_mb']:.0f} MB, {f['worker']})"

@@ -15,6 +15,8 @@ Layout (one directory per project; every table is Parquet)::
                                the records of the stages it read (to tell stale outputs)
       report.html, report/     `rmbuild report` (HTML page and its PNGs)
       view.rrd, <stage>.rrd    rerun recordings (`rmbuild view`, `--rerun`)
+      build_state.json         `rmbuild build`: its inputs' fingerprint, each floor's configs and result
+                               (what a re-run may skip; rmbuild.stages.build_state)
 
 A building (several floors) is a workspace whose manifest lists its floors; each floor is a whole
 single-floor workspace of the layout above, and the building keeps only the totals over its floors::
@@ -121,6 +123,7 @@ ARTEFACTS: dict[str, str] = {
     "report.html": "report.html",
     "report.png_dir": "report",
     "view.rrd": "view.rrd",
+    "build.state": "build_state.json",
 }
 for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.report"] = f"{_dir}/{REPORT}"

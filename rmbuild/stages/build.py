@@ -16,6 +16,7 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
+from rmbuild import __version__
 from rmbuild.config import load_stage_config, to_toml
 from rmbuild.config.build import parse_scheduler
 from rmbuild.errors import RmbuildError, one_line
@@ -29,11 +30,21 @@ from rmbuild.io.workspace import (
     check_output_file,
     check_replaceable,
 )
+from rmbuild.stages.build_state import (
+    STATE_VERSION,
+    floor_is_current,
+    input_fingerprint,
+    keeping_unchanged_floors,
+    read_state,
+    same_inputs,
+    write_state,
+)
 from rmbuild.stages.common import Progress, ensure_progress
 from rmbuild.stages.dask_run import Runner, executor
 from rmbuild.stages.floor_task import (
     TASK_SECTIONS,
     building_reports_task,
+    import_floor_modules,
     ingest_venue,
     run_floor,
     write_building_reports,
@@ -55,46 +66,126 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
         force: bool = False, floorplan: str | Path | None = None, progress: Progress | None = None,
         on_cluster: Any = None) -> dict:
     """Ingest ``inputs`` into ``workspace`` and run every floor's stages; ``cfgs``: section -> config of
-    each of :data:`SECTIONS`. Returns the build report (:func:`run_floors_as_tasks`) with ``ingest``."""
-    from rmbuild.stages import ingest
-
+    each of :data:`SECTIONS`. Without ``force``, a workspace an earlier `build` made is brought up to date:
+    unchanged inputs are not ingested again and unchanged floors not re-run (:mod:`rmbuild.stages.build_state`).
+    Returns the build report (:func:`run_floors_as_tasks`) with ``ingest``."""
     t0 = time.perf_counter()
     sched = parse_scheduler(cfgs["build"].scheduler)
     Path(workspace).resolve().parent.mkdir(parents=True, exist_ok=True)  # the lock lives beside the workspace
     with ExitStack() as stack:
         stack.enter_context(workspace_lock(workspace, "build"))
-        # a cluster given by its address is reached first: unreachable, nothing is written
-        runner = stack.enter_context(executor(sched, None, cfgs["build"].worker_memory_gb, on_cluster)) \
-            if sched.kind == "address" else None
-        summary = ingest.run(inputs, workspace, cfgs["ingest"], fmt=fmt, force=force, progress=progress,
-                             pdr_cfg=cfgs["pdr"], floorplan=floorplan)
-        out = run_floors_as_tasks(workspace, cfgs, force, progress, on_cluster, runner)
+        state = None if force else _previous_state(workspace)
+        # the floor plan's content is fingerprinted as the last input
+        settings = {"ingest": to_toml(cfgs["ingest"], "ingest"), "pdr": to_toml(cfgs["pdr"], "pdr"), "format": fmt,
+                    "floorplan": floorplan is not None}
+        fp = input_fingerprint([*inputs, *([floorplan] if floorplan else [])], settings,
+                               (state or {}).get("inputs"))
+        ingest_now = state is None or not same_inputs(state.get("inputs"), fp)
+        runner = None
+        if sched.kind == "address" or (sched.kind == "local" and ingest_now):
+            # a cluster given by its address is reached first (unreachable: nothing is written); a local one
+            # starts now, its workers importing what the floors need while this process ingests
+            runner = stack.enter_context(executor(sched, None, cfgs["build"].worker_memory_gb, on_cluster,
+                                                  warm=import_floor_modules))
+        if ingest_now:
+            state = _ingest(inputs, workspace, cfgs, fmt, floorplan, state, fp, force, progress)
+        else:
+            log.info("inputs and ingest config unchanged since the last build: not ingested again")
+        out = run_floors_as_tasks(workspace, cfgs, force, progress, on_cluster, runner, state=state)
+    summary = (state or {})["ingest"]
     out["ingest"] = summary
-    out["time_s"]["ingest"] = _seconds((summary.get("building") or summary).get("time_s"))
+    out["ingested"] = ingest_now
+    out["time_s"]["ingest"] = _seconds((summary.get("building") or summary).get("time_s")) if ingest_now else 0.0
     out["time_s"]["total"] = round(time.perf_counter() - t0, 3)
     if out["building"]:
         write_json_atomic(building_report_path(workspace, "build"), out)
     return out
 
 
+def _previous_state(workspace: str | Path) -> dict | None:
+    """The build state of an existing workspace an earlier `build` made; None for a new (or empty)
+    workspace; an error for any other existing workspace or directory (replaced only with ``--force``)."""
+    state = read_state(workspace)
+    if state is None:
+        check_replaceable(Path(workspace), False)
+    return state
+
+
+def _ingest(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], fmt: str | None,
+            floorplan: str | Path | None, state: dict | None, fp: dict, force: bool, progress: Progress | None) -> dict:
+    """Ingest (again), keeping the outputs of the floors whose ingested data did not change; the new build
+    state (written)."""
+    from rmbuild.stages import ingest
+
+    same_version = (state or {}).get("inputs", {}).get("rmbuild_version") == __version__
+    with keeping_unchanged_floors(workspace, state if same_version else None) as kept:
+        summary = ingest.run(inputs, workspace, cfgs["ingest"], fmt=fmt, force=force or state is not None,
+                             progress=progress, pdr_cfg=cfgs["pdr"], floorplan=floorplan)
+    if kept:
+        log.info(f"ingested data unchanged on {len(kept)} floor(s), their outputs kept: {', '.join(sorted(kept))}")
+    floors = {n: e for n, e in (state or {}).get("floors", {}).items() if n in kept}
+    new = {"version": STATE_VERSION, "inputs": fp, "ingest": summary, "floors": floors}
+    write_state(workspace, new)
+    return new
+
+
 def run_floors_as_tasks(workspace: str | Path, cfgs: dict[str, Any], force: bool = False,
-                        progress: Progress | None = None, on_cluster: Any = None, runner: Runner | None = None) -> dict:
+                        progress: Progress | None = None, on_cluster: Any = None, runner: Runner | None = None,
+                        state: dict | None = None) -> dict:
     """Every floor of an ingested workspace (a single-floor workspace: itself) as one task (on ``runner``,
-    else on the configured scheduler), then the building's reports. Returns {"stage": "build", "scheduler",
-    "floors": {name: task result}, "failed": {name: error}, "building": bool, "time_s"}."""
+    else on the configured scheduler), the largest floors first, then the building's reports. With the
+    build ``state`` (kept up to date as floors finish), a floor that is current is not re-run: its previous
+    result comes back with "reused": true. Returns {"stage": "build", "scheduler", "floors": {name: task
+    result}, "failed": {name: error}, "building": bool, "time_s"}."""
     progress = ensure_progress(progress)
     sched = parse_scheduler(cfgs["build"].scheduler)
-    items, index = _floor_items(workspace, cfgs, force)
+    items, index = _floor_items(workspace, cfgs, force or state is not None)
+    reused = {} if force or state is None else \
+        {n: {**state["floors"][n]["result"], "reused": True} for n, a in items.items()
+         if floor_is_current(a[1], a[2], state["floors"].get(n))}
+    todo = {n: (a[0], a[1], a[2], force or state is not None) for n, a in _largest_first(items).items()
+            if n not in reused}
     t0 = time.perf_counter()
     with ExitStack() as stack:
         stack.enter_context(workspace_lock(workspace, "build"))
-        if runner is None or len(items) <= 1:  # one floor (a single-floor workspace): in this process
-            runner = stack.enter_context(executor(sched, len(items), cfgs["build"].worker_memory_gb, on_cluster))
-        results = _run_round(runner, run_floor, items, progress, f"floors ({cfgs['build'].scheduler})", "floors")
+        if runner is None or len(todo) <= 1:  # one floor (a single-floor workspace): in this process
+            runner = stack.enter_context(executor(sched, len(todo), cfgs["build"].worker_memory_gb, on_cluster))
+        runner.fit(len(todo))
+        ran = _run_round(runner, run_floor, todo, progress, f"floors ({cfgs['build'].scheduler})", "floors",
+                         _state_keeper(workspace, state, items)) if todo else {}
         t_tasks = time.perf_counter() - t0
-        out = _finish(workspace, results, cfgs, index, progress)
+        results = {n: reused.get(n) or ran[n] for n in items}
+        out = _finish(workspace, results, cfgs, index, progress,
+                      write=bool(ran) or not (index is not None and index.exists()))
     out["time_s"] = {"floors": round(t_tasks, 3), "building_reports": round(time.perf_counter() - t0 - t_tasks, 3)}
     return out
+
+
+def _largest_first(items: dict[str, tuple]) -> dict[str, tuple]:
+    """The floor tasks, the largest (most poses ingested) first: on N workers the longest floor starts at
+    once instead of after shorter ones (the run ends with its longest chain of floors)."""
+    def poses(args: tuple) -> int:
+        try:
+            return int((Workspace.open(args[1]).read_report("ingest") or {}).get("poses") or 0)
+        except (RmbuildError, OSError, ValueError):
+            return 0  # its task reports what is wrong
+
+    return dict(sorted(items.items(), key=lambda kv: -poses(kv[1])))
+
+
+def _state_keeper(workspace: str | Path, state: dict | None, items: dict[str, tuple]) -> Any:
+    """A callback that records each finished floor in the build state (None without a state)."""
+    if state is None:
+        return None
+
+    def keep(name: str, r: dict) -> None:
+        if r.get("ok"):
+            state["floors"][name] = {"configs": items[name][2], "result": r}
+        else:
+            state["floors"].pop(name, None)
+        write_state(workspace, state)
+
+    return keep
 
 
 def run_venues(venues: list[Venue], out_dir: str | Path, cfgs: dict[str, Any], force: bool = False,
@@ -139,6 +230,7 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
     with ExitStack() as locks:
         items: dict[str, tuple] = {}
         indexes: dict[str, Path | None] = {}
+        order: dict[str, list[str]] = {}
         for n, ws in list(wss.items()):
             try:
                 vitems, indexes[n] = _floor_items(ws, vcfgs[n], force)
@@ -149,13 +241,14 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
                 del wss[n]
                 continue
             items.update({f"{n}/{f}": args for f, args in vitems.items()})
+            order[n] = list(vitems)
         t0 = time.perf_counter()
-        results = _run_round(runner, run_floor, items, progress, "floors", "floors")
+        results = _run_round(runner, run_floor, _largest_first(items), progress, "floors", "floors")
         t_tasks = time.perf_counter() - t0
         out: dict[str, dict] = {}
         reports: dict[str, tuple] = {}
         for n, ws in wss.items():
-            mine = {k.split("/", 1)[1]: r for k, r in results.items() if k.split("/", 1)[0] == n}
+            mine = {f: results[f"{n}/{f}"] for f in order[n]}
             out[n] = _finish(ws, mine, vcfgs[n], None, progress, prefix=f"venue {n}: ")
             out[n]["building"] = indexes[n] is not None
             out[n]["time_s"] = {"floors_round": round(t_tasks, 3)}
@@ -182,24 +275,26 @@ def _floor_items(workspace: str | Path, cfgs: dict[str, Any], force: bool) -> tu
 
 
 def _run_round(runner: Runner, fn: Any, items: dict[str, tuple], progress: Progress, what: str,
-               unit: str) -> dict[str, dict]:
+               unit: str, also: Any = None) -> dict[str, dict]:
     progress.phase(what, len(items), unit)
 
     def done(name: str, r: dict) -> None:
         progress.advance()
         progress.message(f"{name} {'done' if r.get('ok') else 'failed'}")
+        if also is not None:
+            also(name, r)
 
     return runner(fn, items, done)
 
 
 def _finish(workspace: str | Path, results: dict[str, dict], cfgs: dict[str, Any], index: Path | None,
-            progress: Progress, prefix: str = "") -> dict:
-    """Log the floors' warnings, write a building's reports (``index`` None: none); the build report
-    without times."""
+            progress: Progress, prefix: str = "", write: bool = True) -> dict:
+    """Log the warnings of the floors that ran, write a building's reports (``index`` None or not
+    ``write``: none); the build report without times."""
     for name, r in results.items():
-        for w in r.get("warnings", []):
+        for w in [] if r.get("reused") else r.get("warnings", []):
             log.warning(f"{prefix}floor {name}: {w}" if index is not None else f"{prefix}{w}")
-    if index is not None:
+    if index is not None and write:
         progress.phase("building reports")
         write_building_reports(workspace, results, cfgs["evaluate"], index)
     return {"stage": "build", "scheduler": cfgs["build"].scheduler, "floors": results,

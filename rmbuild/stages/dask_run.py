@@ -12,13 +12,23 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, Protocol
 
 from rmbuild.config.build import Scheduler
 from rmbuild.errors import InputError, RmbuildError, one_line
 
 #: seconds to wait for a cluster's scheduler to answer before giving up
 CONNECT_TIMEOUT_S = 30
+#: the environment of a local cluster's worker processes, set before they start (so before numpy loads its
+#: BLAS): one BLAS / OpenMP thread per worker, as each worker runs one floor on one core (Dask's default
+#: too). Dask's default also sets MALLOC_TRIM_THRESHOLD_=65536 (freed memory handed back to the system at
+#: once): it doubled a floor task's system time (~1.5 s more of ~18 s of CPU on MS ILC site2 B1, paired
+#: runs in docs/scale-out.md): left out.
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: Dask config of a local cluster: the environment above, and no statistical profiler in the workers (it
+#: samples the running task's stack every 10 ms under the GIL: ~5% of a floor task's CPU time, same runs)
+LOCAL_CLUSTER_CONFIG = {"distributed.nanny.pre-spawn-environ": WORKER_ENV,
+                        "distributed.worker.profile.enabled": False}
 
 
 def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Scheduler,
@@ -31,33 +41,75 @@ def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Sched
         return run(fn, items, on_done)
 
 
-#: runs ``fn`` over ``items`` (name -> args), returns name -> result, calls ``on_done(name, result)`` as each ends
-Runner = Callable[[Callable[..., dict], dict[str, tuple], Callable[[str, dict], None] | None], dict[str, dict]]
+class Runner(Protocol):
+    """Runs ``fn`` over ``items`` (name -> args), returns name -> result (in the order of ``items``), calls
+    ``on_done(name, result)`` as each ends."""
+
+    def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
+                 on_done: Callable[[str, dict], None] | None) -> dict[str, dict]: ...
+
+    def fit(self, n_items: int) -> None:
+        """The rounds to come have at most ``n_items`` items: a local cluster of the default size (started
+        before they were known) lets its extra workers go."""
+
+
+class _Serial:
+    def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
+                 on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
+        out = {}
+        for name, args in items.items():
+            out[name] = call_task(fn, *args)
+            if on_done is not None:
+                on_done(name, out[name])
+        return out
+
+    def fit(self, n_items: int) -> None:
+        pass
+
+
+class _OnDask:
+    def __init__(self, client: Any, shrinkable: bool, warming: list) -> None:
+        self.client, self.shrinkable, self.warming = client, shrinkable, warming
+
+    def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
+                 on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
+        if self.warming:
+            from distributed import wait
+
+            wait(self.warming)  # a warm-up that failed (a worker died) leaves its floor to fail on its own
+            self.warming = []
+        return _submit_all(self.client, fn, items, on_done)
+
+    def fit(self, n_items: int) -> None:
+        n = len(self.client.scheduler_info().get("workers", {}))
+        if self.shrinkable and 1 <= n_items < n:
+            self.client.cluster.scale(n_items)
 
 
 @contextmanager
 def executor(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float = 0.0,
-             on_cluster: Callable[[str], None] | None = None) -> Iterator[Runner]:
+             on_cluster: Callable[[str], None] | None = None,
+             warm: Callable[[], None] | None = None) -> Iterator[Runner]:
     """A runner of task rounds on one scheduler (one cluster for several rounds): in this process for
     ``serial`` or a single item; else on Dask. ``n_items``: the most items a round has (None: unknown),
-    which caps a ``local`` cluster's default size."""
+    which caps a ``local`` cluster's default size. ``warm()`` runs on every worker as soon as it is up, in
+    the background (imports: a worker's first task then starts warm)."""
     if scheduler.kind == "serial" or (n_items is not None and n_items <= 1):
-        yield _serial
+        yield _Serial()
         return
     with _client(scheduler, n_items, worker_memory_gb) as client:
+        warming = _warm_up(client, warm) if warm is not None else []
         if on_cluster is not None:
             on_cluster(cluster_text(client))
-        yield lambda fn, items, on_done: _submit_all(client, fn, items, on_done)
+        yield _OnDask(client, scheduler.kind == "local" and scheduler.workers is None, warming)
 
 
-def _serial(fn: Callable[..., dict], items: dict[str, tuple],
-            on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
-    out = {}
-    for name, args in items.items():
-        out[name] = call_task(fn, *args)
-        if on_done is not None:
-            on_done(name, out[name])
-    return out
+def _warm_up(client: Any, warm: Callable[[], None]) -> list:
+    """``warm()`` on every worker, as a task of its own: the futures (the first round waits for them, so
+    that a worker still warming does not leave every floor to the others)."""
+    return [client.submit(warm, workers=[w], allow_other_workers=False, pure=False,
+                          key=f"rmbuild-warm-up-{i}-{os.urandom(4).hex()}")
+            for i, w in enumerate(client.scheduler_info().get("workers", {}))]
 
 
 def call_task(fn: Callable[..., dict], *args: Any) -> dict:
@@ -78,8 +130,10 @@ def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
                 on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
     from distributed import as_completed
 
-    futures = {client.submit(call_task, fn, *args, key=f"rmbuild-{name}-{os.urandom(4).hex()}", pure=False): name
-               for name, args in items.items()}
+    # the items start in the order given (the caller puts the longest first): the first has the highest priority
+    futures = {client.submit(call_task, fn, *args, key=f"rmbuild-{name}-{os.urandom(4).hex()}", pure=False,
+                             priority=len(items) - i): name
+               for i, (name, args) in enumerate(items.items())}
     out: dict[str, dict] = {}
     for fut in as_completed(list(futures)):
         name = futures[fut]
@@ -105,25 +159,37 @@ def _client(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float) 
         with client:
             yield client
         return
+    import dask
+
     cores = os.cpu_count() or 1
     n = scheduler.workers or max(1, min(n_items or cores, cores))
     memory: Any = int(worker_memory_gb * 1e9) if worker_memory_gb > 0 else "auto"
-    with (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory,
-                       dashboard_address=":0" if _has_dashboard() else None) as cluster,
-          Client(cluster) as client):
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies pass it on to the workers they start
+        # the scheduler's web server (the dashboard when bokeh is installed) on a free port, not Dask's 8787:
+        # another cluster on the machine may hold that one
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory,
+                               dashboard_address=":0")
+    with cluster, Client(cluster) as client:
         yield client
 
 
-def _has_dashboard() -> bool:
-    """Dask's dashboard needs bokeh (an optional package)."""
+def _has_bokeh() -> bool:
+    """Whether bokeh, which Dask's dashboard needs (the optional extra ``rmbuild[dashboard]``), is installed
+    (run where the scheduler runs)."""
     import importlib.util
 
     return importlib.util.find_spec("bokeh") is not None
 
 
 def cluster_text(client: Any) -> str:
-    """"Dask cluster at ADDRESS: N workers, dashboard URL" (the dashboard when bokeh is installed)."""
+    """"Dask cluster at ADDRESS: N workers, dashboard URL", or a one-line note when the scheduler has no
+    dashboard (bokeh missing where it runs)."""
     info = client.scheduler_info()
     n = len(info.get("workers", {}))
-    dash = f", dashboard {client.dashboard_link}" if _has_dashboard() else " (no dashboard: `pip install bokeh`)"
+    try:
+        has = bool(client.run_on_scheduler(_has_bokeh))
+    except Exception:  # a scheduler that refuses to run code: say nothing of its dashboard
+        has = False
+    dash = f", dashboard {client.dashboard_link}" if has else \
+        " (no dashboard: it needs bokeh, `pip install 'rmbuild[dashboard]'`)"
     return f"Dask cluster at {info.get('address', '?')}: {n} worker(s){dash}"

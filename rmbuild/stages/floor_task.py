@@ -59,6 +59,13 @@ def run_floor(name: str, path: str, configs: dict[str, str], force: bool) -> dic
             "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
+def import_floor_modules() -> None:
+    """Import what a floor task uses (run on a cluster's workers as they start, while the client ingests)."""
+    import matplotlib.pyplot  # noqa: F401
+
+    from rmbuild.stages import evaluate, export_map, optimize, report  # noqa: F401
+
+
 def why_no_evaluate(ingest_report: dict) -> str | None:
     """Why a floor is not evaluated (None: it is): no ground truth to score against, or too few walks to
     hold one out."""
