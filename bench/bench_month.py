@@ -41,6 +41,8 @@ def prepare(sizes: list[int]) -> dict:
     """Simulate + ingest the month once; pickle every size's subset of walks into SCRATCH."""
     from bench.bench_optimize import _load, _subset
 
+    if all(_subset_path(n).exists() for n in sizes):  # a previous run's subsets (the simulation is seeded)
+        return {"reused": str(SCRATCH)}
     t0 = time.perf_counter()
     ds, fp = _load("month", SEED)
     out = {"simulate_ingest_s": round(time.perf_counter() - t0, 1), "poses": len(ds.poses), "walks": len(ds.walks)}
@@ -139,12 +141,17 @@ def main(sizes: tuple[int, ...] = SIZES, max_gb: float = 8.0, max_min: float = 3
     p = subprocess.run([sys.executable, "-m", "bench.bench_month", "--prepare", ",".join(map(str, sizes))],
                        capture_output=True, text=True, check=True)
     res: dict = {"preset": "month", "seed": SEED, "prepare": json.loads(p.stdout.strip().splitlines()[-1]),
-                 "max_memory_mb": max_gb * 1024, "max_wall_s": max_min * 60, "cases": [],
-                 "load_at_start": os.getloadavg()}
+                 "max_memory_mb": max_gb * 1024, "max_wall_s": max_min * 60, "cases": []}
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     for n in sizes:
         print(f"month subset ~{n:,} poses ...", flush=True)
-        res["cases"].append(watched(n, max_gb * 1024, max_min * 60))
+        load = os.getloadavg()[0]
+        res["cases"].append({**watched(n, max_gb * 1024, max_min * 60), "commit": commit, "load_at_start": load})
         print(json.dumps(res["cases"][-1]), flush=True)
+    old = RESULTS / "month.json"  # sizes not run this time keep their last figures (each case says its commit)
+    if old.exists():
+        kept = [c for c in json.loads(old.read_text()).get("cases", []) if c["target_poses"] not in sizes]
+        res["cases"] = sorted(kept + res["cases"], key=lambda c: c["target_poses"])
     write_result("month", res)
     md = _markdown(res)
     (RESULTS / "month.md").write_text(md)
