@@ -11,6 +11,7 @@ runs in a fresh subprocess, watched by this one: a case whose resident memory pa
 the target) or whose wall time passes ``--max-min`` is killed, and the phase it had reached is recorded.
 Figures per size: pair search, placement (init), solve, total, peak memory, poses solved, factors, linked
 walks and the linked walks' mean position error after one SE(2) fit (as bench_optimize's `large` case).
+`large` itself runs first (``--no-large`` skips it): on the shared machine only ratios within one run compare.
 """
 
 from __future__ import annotations
@@ -136,13 +137,19 @@ def _markdown(res: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
-def main(sizes: tuple[int, ...] = SIZES, max_gb: float = 8.0, max_min: float = 30.0) -> dict:
+def main(sizes: tuple[int, ...] = SIZES, max_gb: float = 8.0, max_min: float = 30.0, with_large: bool = True) -> dict:
     sizes = tuple(sorted(sizes))
     p = subprocess.run([sys.executable, "-m", "bench.bench_month", "--prepare", ",".join(map(str, sizes))],
                        capture_output=True, text=True, check=True)
     res: dict = {"preset": "month", "seed": SEED, "prepare": json.loads(p.stdout.strip().splitlines()[-1]),
                  "max_memory_mb": max_gb * 1024, "max_wall_s": max_min * 60, "cases": []}
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    if with_large:  # `large` in the same run: the shared machine's load moves absolute times 5-10x
+        q = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--case", "large", "robust", str(SEED)],
+                           capture_output=True, text=True)
+        c = json.loads(q.stdout.strip().splitlines()[-1]) if q.returncode == 0 else {}
+        res["large_same_run"] = {"optimize_total_s": c.get("time_s", {}).get("optimize_total"),
+                                 "time_s": c.get("time_s"), "peak_memory_mb": c.get("peak_memory_mb")}
     for n in sizes:
         print(f"month subset ~{n:,} poses ...", flush=True)
         load = os.getloadavg()[0]
@@ -164,6 +171,7 @@ if __name__ == "__main__":
     ap.add_argument("--sizes", default=",".join(map(str, SIZES)))
     ap.add_argument("--max-gb", type=float, default=8.0)
     ap.add_argument("--max-min", type=float, default=30.0)
+    ap.add_argument("--no-large", action="store_true", help="skip the `large` reference case")
     ap.add_argument("--case", type=int)
     ap.add_argument("--prepare")
     a = ap.parse_args()
@@ -172,4 +180,4 @@ if __name__ == "__main__":
     elif a.prepare:
         print(json.dumps(prepare([int(s) for s in a.prepare.split(",")])))
     else:
-        main(tuple(int(s) for s in a.sizes.split(",")), a.max_gb, a.max_min)
+        main(tuple(int(s) for s in a.sizes.split(",")), a.max_gb, a.max_min, not a.no_large)
