@@ -71,6 +71,8 @@ def run_case(n: int) -> dict:
         if phase not in seen:
             seen.add(phase)
             print(f"PHASE {phase} {time.perf_counter() - t0:.1f}", file=sys.stderr, flush=True)
+        if phase == "pair_search" and info.get("done") == info.get("total"):  # the search's last block
+            print(f"PHASE pair_search_done {time.perf_counter() - t0:.1f}", file=sys.stderr, flush=True)
 
     r = optimize(ds, fp, OptimizeConfig(), progress=progress)
     total = time.perf_counter() - t0

@@ -34,12 +34,13 @@ def _loc(d: dict, case: str, name: str, key: str = "mean") -> Any:
 
 
 def _month_case(c: dict) -> str:
+    load = f" at load {c['load_at_start']:.0f}" if "load_at_start" in c else ""
     if c["status"] != "ok":
-        return f"{c['status']} ({c['reason']}) after {c['after_s']:.0f} s"
+        return f"{c['status']} ({c['reason']}) after {c['after_s']:.0f} s{load}"
     t = c["time_s"]
     return (f"{c['optimize_total_s']:.0f} s ({t['pair_search']:.0f} / {t['init']:.0f} / {t['solve']:.0f}), "
             f"{c['peak_memory_mb']:,.0f} MB, linked walks' error "
-            f"{(c['linked_error'] or {}).get('linked_mean_m', 0):.2f} m")
+            f"{(c['linked_error'] or {}).get('linked_mean_m', 0):.2f} m{load}")
 
 
 def _month_500k(d: dict) -> str:
