@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 import traceback
 
@@ -11,6 +12,9 @@ from bench.summary import write_summary
 
 BENCHES = ["bench_ingest", "bench_optimize", "bench_map", "bench_pdr", "bench_localizers", "bench_uiloc", "bench_viz",
            "bench_scale", "bench_incremental"]
+# the venue-month scaling run (bench_month) takes ~45 min: only with RMBUILD_BENCH_MONTH=1
+if os.environ.get("RMBUILD_BENCH_MONTH") == "1":
+    BENCHES.append("bench_month")
 
 
 def main() -> int:

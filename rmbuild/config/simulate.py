@@ -341,13 +341,15 @@ class SimulateConfig:
 
 
 
-PRESETS = ("tiny", "default", "large", "corridor12")
+PRESETS = ("tiny", "default", "large", "month", "corridor12")
 
 
 def preset_config(name: str, seed: int) -> SimulateConfig:
     """The named preset with ``seed``: "tiny" (tests, ~600 steps), "default" (~10 walks, ~5,000 steps),
-    "large" (~50,000 steps, benchmarks), "corridor12" (12 straight-ish walks along one long corridor,
-    random initial headings: Gu et al. 2017's heading-alignment experiment). Raises ValueError for other names."""
+    "large" (~50,000 steps, benchmarks), "month" (large's venue walked ten times as much: ~500,000 steps,
+    1,000 walks, a month of a venue's staff walks; the scaling benchmark), "corridor12" (12 straight-ish
+    walks along one long corridor, random initial headings: Gu et al. 2017's heading-alignment experiment).
+    Raises ValueError for other names."""
     base = SimulateConfig(seed=seed)
     r = dataclasses.replace
     if name == "default":
@@ -374,6 +376,9 @@ def preset_config(name: str, seed: int) -> SimulateConfig:
             devices=r(base.devices, n_devices=8, test_device=(0.9, -5.0)),
             magnetometer=r(base.magnetometer, missing_fraction=0.15, n_hotspots=10),
         )
+    elif name == "month":
+        lg = preset_config("large", seed)
+        cfg = r(lg, walkers=r(lg.walkers, n_users=100, n_long_walks=400, n_short_walks=600, n_test_walks=100))
     elif name == "corridor12":
         cfg = r(
             base,

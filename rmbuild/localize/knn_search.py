@@ -5,7 +5,10 @@ scan detects ~20 of ~200 APs. Reference points (RPs) are sorted along a Morton c
 cut into blocks of :data:`RP_BLOCK`; a block's RPs detect few APs between them (~70 of 186 on the `large`
 preset), so ``−2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only. ``‖a_r‖²`` is
 precomputed; ``‖a_q‖²`` is a per-query constant and does not change the ranking. A few queries at a time
-(one-at-a-time localization) instead use one product over the queries' detected APs only.
+(one-at-a-time localization) go one by one: one float32 vector-matrix product over the rows (APs) of
+``−2 aᵀ`` the query detects, in the original RP order, and one ``argpartition``. (An inverted index — per AP,
+the RPs detecting it — with a weighted ``bincount`` over the query's postings was 2-3x slower: a query's APs
+are the common ones, ~90k postings of 1.6M entries, and the scattered sums cost more than the dense rows.)
 
 The ``c`` smallest entries of each query's row come from a two-level selection: the minimum of every group
 of :data:`GROUP` consecutive RPs, the ``c`` groups with the smallest minima (any of the ``c`` nearest RPs
@@ -26,7 +29,7 @@ from rmbuild.localize.blas import one_blas_thread
 RP_BLOCK = 128
 #: RPs per group of the two-level selection (16: 1/16 of the entries reach the first argpartition).
 GROUP = 16
-#: queries up to this many at once use one product over their detected APs instead of the blocks.
+#: queries up to this many at once go through the inverted index one by one instead of the blocks.
 FEW_QUERIES = 8
 #: worker threads over chunks of queries; BLAS runs one thread inside each (the products are small, and a
 #: multi-threaded BLAS on small products was 3-8x slower on the shared 2-core machine).
@@ -67,27 +70,33 @@ class SparseL2Shortlist:
         sq = np.full(self.n_pad, np.inf, dtype=np.float32)
         sq[:n_rp] = (a[self.perm].astype(np.float64) ** 2).sum(axis=1)
         self.sq = sq
-        self.wt = np.ascontiguousarray(-2.0 * ap.T)  # (n_ap, n_pad): the few-queries product
+        self.wt = np.ascontiguousarray(-2.0 * a.T, dtype=np.float32)  # (n_ap, n_rp), original order: one query
+        self.sq_orig = sq[:n_rp][np.argsort(self.perm)]
         self.blocks: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         for s in range(0, self.n_pad, RP_BLOCK):
             e = min(s + RP_BLOCK, self.n_pad)
             cols = np.flatnonzero((ap[s:e] != 0).any(axis=0))
             self.blocks.append((s, e, cols, np.ascontiguousarray(-2.0 * ap[s:e][:, cols])))
 
+    def _one(self, aq: np.ndarray, c: int) -> np.ndarray:
+        """(c,) RP indices holding the ``c`` nearest of one query row ``aq`` (n_ap,), ties aside."""
+        if c >= self.n_rp:
+            return np.arange(self.n_rp)
+        cols = np.flatnonzero(aq)
+        d = aq[cols].astype(np.float32) @ self.wt[cols]
+        d += self.sq_orig
+        return np.argpartition(d, c - 1)[:c]
+
     def _distances(self, aq: np.ndarray) -> np.ndarray:
         """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding)."""
         nq = len(aq)
-        if nq <= FEW_QUERIES:
-            cols = np.flatnonzero((aq != 0).any(axis=0))
-            dt = self.wt[cols].T @ aq[:, cols].T.astype(np.float32)
-        else:
-            aqt = np.ascontiguousarray(aq.T, dtype=np.float32)  # (n_ap, nq)
-            dt = np.empty((self.n_pad, nq), dtype=np.float32)
-            for s, e, cols, w in self.blocks:
-                if len(cols):
-                    np.matmul(w, aqt[cols], out=dt[s:e])
-                else:
-                    dt[s:e] = 0.0
+        aqt = np.ascontiguousarray(aq.T, dtype=np.float32)  # (n_ap, nq)
+        dt = np.empty((self.n_pad, nq), dtype=np.float32)
+        for s, e, cols, w in self.blocks:
+            if len(cols):
+                np.matmul(w, aqt[cols], out=dt[s:e])
+            else:
+                dt[s:e] = 0.0
         dt += self.sq[:, None]
         return dt
 
@@ -101,8 +110,9 @@ class SparseL2Shortlist:
         def run(s: int) -> None:
             out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
 
-        if nq <= FEW_QUERIES:  # one small product: entering the BLAS limit would cost more than it saves
-            out[:] = self._select(self._distances(aq), c)
+        if nq <= FEW_QUERIES:  # the inverted index, query by query: no BLAS, no blocks
+            for i in range(nq):
+                out[i] = self._one(aq[i], c)
             return out
         with one_blas_thread():
             if len(starts) > 1 and THREADS > 1:

@@ -25,6 +25,10 @@ from rmbuild.slam.rss import RssMatrix
 
 Progress = Callable[[str, dict], None] | None
 
+#: entries (rows x columns) of one block of the segment search (16M: the `large` preset's ~5,000 segments
+#: keep the full 1,024-row blocks; a venue-month's 50,000 get 335 rows)
+BLOCK_ELEMS = 1 << 24
+
 
 @dataclass(frozen=True)
 class SearchParams:
@@ -186,7 +190,9 @@ def run_matched_candidates(
     k = min(pcfg.top_k, max(n_seg - 1, 1))
     nb = np.full((n_seg, k), -1, np.int64)
     nbd = np.full((n_seg, k), np.inf, np.float32)
-    bs = max(16, pcfg.block_rows // 2)
+    # rows per block: at most half the block size, fewer on big inputs so one block's float64 temporaries
+    # stay ~BLOCK_ELEMS entries (1024 rows x 50,000 segments of a venue-month were 400 MB per temporary)
+    bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n_seg, 1)))
     for s in range(0, n_seg, bs):
         rows = np.arange(s, min(n_seg, s + bs))
         d, common = srm.block(rows)

@@ -21,6 +21,7 @@ import numpy as np
 from rmbuild import geometry
 from rmbuild.config.optimize import PlacementConfig
 from rmbuild.slam.evidence.base import RotationPriors
+from rmbuild.slam.pairs import BLOCK_ELEMS
 from rmbuild.slam.placement.edges import RANSAC_SEED
 from rmbuild.slam.placement.fits import accept_pairs_fit, accept_scans_fit, fit_to_pairs, fit_to_scans
 from rmbuild.slam.placement.model import GrowState, WalkFit
@@ -262,16 +263,22 @@ class ScanEvidence(GrowthEvidence):
         u_rows = np.flatnonzero(free[self.row_walk])
         if not (len(new_rows) and len(u_rows)):
             return
-        for b0 in range(0, len(u_rows), KNN_BLOCK_ROWS):
-            ur = u_rows[b0:b0 + KNN_BLOCK_ROWS]
+        # fewer rows per block against many new scans: a block's temporaries stay ~BLOCK_ELEMS entries
+        # (2,048 rows x 30,000 new scans took 3 GB at 150k poses); the column of each kept entry is read
+        # from the old best or from new_rows instead of a (rows x columns) int64 matrix of candidates
+        step = max(16, min(KNN_BLOCK_ROWS, BLOCK_ELEMS // len(new_rows)))
+        for b0 in range(0, len(u_rows), step):
+            ur = u_rows[b0:b0 + step]
             d, common = self.sim.rss.block(ur, new_rows)
             d[common < self.sim.min_common] = np.inf
+            del common
             dd = np.concatenate([self.best_d[ur], d], axis=1)
-            cc = np.concatenate([self.best_c[ur], np.broadcast_to(new_rows, d.shape)], axis=1)
+            del d
             kk = min(KNN_K, dd.shape[1])
             idx = np.argpartition(dd, kk - 1, axis=1)[:, :kk]
+            old = np.take_along_axis(self.best_c[ur], np.minimum(idx, KNN_K - 1), axis=1)
             self.best_d[ur, :kk] = np.take_along_axis(dd, idx, axis=1)
-            self.best_c[ur, :kk] = np.take_along_axis(cc, idx, axis=1)
+            self.best_c[ur, :kk] = np.where(idx < KNN_K, old, new_rows[np.maximum(idx - KNN_K, 0)])
 
     def round(self, st, placed, free, prior, c_id, r, log) -> list:
         self._merge_neighbours(self._new_walks, free)
