@@ -67,8 +67,11 @@ def test_grow_links_short_crossing_walks():
     """Many short walks (~60 steps) with known heading: most are linked and placed."""
     ds, fp = make_venue(n_walks=14, steps_per_walk=60, seed=11)
     r = optimize(ds, fp, OptimizeConfig())
-    # 13 of 14 with min_lead = 0; the lead rule (false-pair robustness) rejects 3-vs-1 splits here
-    assert r.walks["linked"].sum() >= 9
+    # 13 of 14 with min_lead = 0; the lead rule (false-pair robustness) rejects 3-vs-1 splits here; of the
+    # 9 placed, the RF check leaves out w011, placed wrong (the others' landmark error 13.1 -> 8.0 m)
+    assert r.walks["linked"].sum() >= 8
+    linked = r.walks.loc[r.walks["linked"], "walk_id"].tolist()
+    assert trajectory_metrics(r.poses, ds, fit_walks=linked)["landmark_error_fitted_walks_m"]["mean"] < 10.0
     lm = trajectory_metrics(r.poses, ds)["landmark_error_m"]
     raw = trajectory_metrics(ds.poses, ds)["landmark_error_m"]
     assert lm["mean"] < raw["mean"]
@@ -246,3 +249,21 @@ def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
     assert list(pl.component[[0, 1, 4]]) == [0, 0, 0] and pl.component[2] > 0 and pl.component[3] > 0
     assert list(pl.method[2:4]) == ["refuted", "refuted"]
     assert refute(placement(true_T), walks, sim) == []  # placed where they belong: nothing refuted
+
+
+def test_a_walk_its_compass_misplaces_is_left_unlinked_not_placed_wrong():
+    """A walk whose compass is 90 deg off is fitted with that rotation ~60 m from where it was (the others'
+    error stays 0.7 m): the RF check leaves it unlinked, reported as refuted, instead of in the map."""
+    import dataclasses
+
+    ds, fp = make_venue(n_walks=5, steps_per_walk=260, seed=1)
+    poses = ds.poses.copy()
+    one = poses["walk_id"] == "w001"
+    poses.loc[one, "heading_rad"] = poses.loc[one, "heading_rad"] + np.pi / 2
+    r = optimize(dataclasses.replace(ds, poses=poses), fp, OptimizeConfig())
+    w = r.walks.set_index("walk_id")
+    assert not w.loc["w001", "linked"] and w.loc["w001", "placement"] == "refuted"
+    assert w["linked"].sum() == 4 and r.stats["refuted_walks"] == ["w001"]
+    assert any("RF check" in m and "w001" in m for m in r.stats["warnings"])
+    others = [f"w00{i}" for i in (0, 2, 3, 4)]
+    assert trajectory_metrics(r.poses, ds, fit_walks=others)["landmark_error_fitted_walks_m"]["mean"] < 1.5
