@@ -31,6 +31,7 @@ from rmbuild.slam.evidence.base import StaticFactors
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.gauge import gauge_factors, gauge_nodes
 from rmbuild.slam.placement import Placement, gather, place
+from rmbuild.slam.placement.rfcheck import refute
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.solve import SolveOutcome
 from rmbuild.slam.solve import run as run_solves
@@ -125,6 +126,9 @@ def optimize(
     final_xyt = init_xyt.copy() if checks.rejected else outcome.poses
     timing["checks"] = time.perf_counter() - t0
 
+    if cfg.placement.method == "grow":  # the RF check (placement/rfcheck.py) on the solved poses
+        sim = wifi.scan_locator()
+        placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2])
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
     line = report.unlinked_warning(walks, walks_df, placement.reference)

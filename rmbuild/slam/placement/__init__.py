@@ -24,7 +24,6 @@ from rmbuild.slam.placement.grow import PairEvidence, ScanEvidence, grow
 from rmbuild.slam.placement.link import link_components
 from rmbuild.slam.placement.merge import merge_components, orient_components
 from rmbuild.slam.placement.model import GrowState, Placement, WalkFit
-from rmbuild.slam.placement.rfcheck import refute
 from rmbuild.slam.problem import WalkSet
 
 __all__ = ["Placement", "WalkFit", "place"]
@@ -78,8 +77,6 @@ def place(walks: WalkSet, sources: list[EvidenceSource], cfg: PlacementConfig, r
             if float(wlen[alt.component == 0].sum()) > size[0]:
                 res = alt
     res.edge_fits = (len(edges), sum(e.accepted for e in edges))
-    if sim is not None:
-        res.refuted = refute(res, walks, sim)
     return res
 
 

@@ -9,10 +9,11 @@ these over the overlapping scans. Calibrated per data set by the RF model, it me
 A phone with another gain looks far from everything; each walk's distances are reduced first by how much
 further its best matches in other walks are than the median walk's.
 
-:func:`refute` applies it once placement is done, before the solve: each linked walk against the rest of the
-reference component; a walk the overlap contradicts is left unlinked rather than pulled to a wrong place.
-(Applied inside growth instead, refusing each fit as it is made, it changed which walks seed the later
-merges and cost MS ILC site1/F2 23 linked walks; docs/optimize.md.)
+:func:`refute` applies it to the solved poses: each linked walk against the rest of the reference
+component; a walk the overlap contradicts is left unlinked (out of the map) rather than kept at a wrong place.
+(Applied to the placement before the solve it also refuted walks the solve puts right; applied inside growth,
+refusing each fit as it is made, it changed which walks seed the later merges and cost MS ILC site1/F2 23
+linked walks; docs/optimize.md.)
 """
 
 from __future__ import annotations
