@@ -20,7 +20,12 @@ from rmbuild.cli import main
 try:
     main(sys.argv[2:])
 finally:
-    sys.stderr.write(f"\\nPEAK_RSS_KB={resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}\\n")
+    # this process's own high-water mark: ru_maxrss also counts the parent's memory at the fork before exec
+    try:
+        peak = next(int(ln.split()[1]) for ln in open("/proc/self/status") if ln.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    sys.stderr.write(f"\\nPEAK_RSS_KB={peak}\\n")
 """
 
 
