@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
-from bench.bench_real import DEFAULT_DATASETS, run_pipeline
+from bench.bench_real import ilc_data_root, run_pipeline
 from bench.common import RESULTS, write_result
 
 #: per stage directory, the report keys that must be equal between a building's floor and its own run
@@ -145,7 +144,7 @@ def main() -> None:
     if args.synthetic:
         write_result("floors_synthetic", synthetic(args.scratch))
         return
-    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)) / "msft-ilc20" / "data"
+    root = ilc_data_root()
     if not root.is_dir():
         print(f"skipped: {root} absent")
         return

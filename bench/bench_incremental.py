@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from bench.bench_real import DEFAULT_DATASETS
+from bench.bench_real import ilc_data_root
 from bench.common import RESULTS, write_result
 
 #: the issue's targets: the incremental run at least this many times faster, accuracy within this share
@@ -102,7 +102,7 @@ def main() -> None:
     ap.add_argument("--share", type=float, default=0.2)
     ap.add_argument("--scratch", type=Path, default=Path("/tmp/rmbuild-bench-incremental"))
     args = ap.parse_args()
-    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)) / "msft-ilc20" / "data"
+    root = ilc_data_root()
     if not root.is_dir():
         print(f"skipped: {root} absent")
         return

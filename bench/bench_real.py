@@ -27,6 +27,11 @@ from bench.common import write_result
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATASETS = REPO.parent / "shared" / "datasets"
+
+
+def ilc_data_root() -> Path:
+    """The MS ILC 2.0 floors' directory under $RMBUILD_DATASETS (default: DEFAULT_DATASETS)."""
+    return Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)) / "msft-ilc20" / "data"
 DEFAULT_SCRATCH = Path("/tmp/rmbuild-bench-real")
 #: floor -> (folder under the dataset root, ingest --format)
 FLOORS = {

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.bench_real import DEFAULT_DATASETS
+from bench.bench_real import ilc_data_root
 from bench.common import RESULTS, write_result
 
 #: per floor: the tables compared between schedulers
@@ -76,7 +76,7 @@ def main() -> None:
     ap.add_argument("--schedulers", default="serial,local:2")
     ap.add_argument("--scratch", type=Path, default=Path("/tmp/rmbuild-bench-scale"))
     args = ap.parse_args()
-    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)) / "msft-ilc20" / "data"
+    root = ilc_data_root()
     if not root.is_dir():
         print(f"skipped: {root} absent")
         return

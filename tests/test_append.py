@@ -2,28 +2,14 @@
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from cli_util import run_cli
+from cli_util import run_cli, split_input
 
 from rmbuild.io.workspace import Workspace
-
-
-def _split(src: Path, dst: Path, walks: set[str]) -> Path:
-    """The part of the input at ``src`` that belongs to ``walks`` (tables without walk_id copied whole)."""
-    for f in sorted(p for p in src.rglob("*") if p.is_file()):
-        out = dst / f.relative_to(src)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if f.suffix != ".csv":
-            shutil.copy(f, out)
-            continue
-        df = pd.read_csv(f, dtype={"walk_id": str})
-        (df[df["walk_id"].isin(walks)] if "walk_id" in df else df).to_csv(out, index=False)
-    return dst
 
 
 @pytest.fixture(scope="module")
@@ -35,8 +21,8 @@ def parts(tmp_path_factory) -> dict[str, Path]:
     simulate.run(base / "all", preset_config("tiny", 5))
     ids = pd.read_csv(base / "all" / "walks.csv", dtype={"walk_id": str})["walk_id"].tolist()
     k = int(len(ids) * 0.8)
-    return {"all": base / "all", "old": _split(base / "all", base / "old", set(ids[:k])),
-            "new": _split(base / "all", base / "new", set(ids[k:])), "base": base}
+    return {"all": base / "all", "old": split_input(base / "all", base / "old", set(ids[:k])),
+            "new": split_input(base / "all", base / "new", set(ids[k:])), "base": base}
 
 
 def test_append_equals_ingesting_all_at_once(parts: dict[str, Path], capsys: pytest.CaptureFixture) -> None:

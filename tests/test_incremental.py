@@ -10,25 +10,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from cli_util import run_cli
+from cli_util import run_cli, split_input
 
 from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace
 
 pytest.importorskip("gtsam")
 
-
-def _split(src: Path, dst: Path, walks: set[str]) -> Path:
-    """The part of the simulated input at ``src`` that belongs to ``walks``."""
-    for f in sorted(p for p in src.rglob("*") if p.is_file()):
-        out = dst / f.relative_to(src)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if f.suffix != ".csv":
-            shutil.copy(f, out)
-            continue
-        df = pd.read_csv(f, dtype={"walk_id": str})
-        (df[df["walk_id"].isin(walks)] if "walk_id" in df else df).to_csv(out, index=False)
-    return dst
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +31,8 @@ def venue(tmp_path_factory) -> dict:
     simulate.run(root / "all", preset_config("tiny", 5))
     ids = pd.read_csv(root / "all" / "walks.csv", dtype={"walk_id": str})["walk_id"].tolist()
     k = int(len(ids) * 0.8)
-    old, new = _split(root / "all", root / "old", set(ids[:k])), _split(root / "all", root / "new", set(ids[k:]))
+    old = split_input(root / "all", root / "old", set(ids[:k]))
+    new = split_input(root / "all", root / "new", set(ids[k:]))
 
     def run(*args) -> None:
         with pytest.raises(SystemExit) as e:

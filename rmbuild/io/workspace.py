@@ -144,7 +144,8 @@ def _sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _sha256(path: Path) -> str:
+def sha256_file(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes, read in 1 MiB chunks."""
     h = hashlib.sha256()
     with path.open("rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -361,7 +362,7 @@ class Workspace:
         out: dict[str, str | None] = {}
         for s in STAGE_INPUTS[stage]:
             p = self.root / STAGE_DIRS[s] / RECORD
-            out[s] = _sha256(p) if p.is_file() else None
+            out[s] = sha256_file(p) if p.is_file() else None
         return out
 
     def check_can_write(self, stage: str, force: bool) -> None:
@@ -450,7 +451,7 @@ class Workspace:
         files = rec.get("files", {})
         problems = [f"{rel}: missing" for rel in files if not (self.root / rel).is_file()]
         problems += [f"{rel}: checksum mismatch" for rel, h in files.items()
-                     if (self.root / rel).is_file() and _sha256(self.root / rel) != h]
+                     if (self.root / rel).is_file() and sha256_file(self.root / rel) != h]
         present = {str(p.relative_to(self.root)) for p in d.rglob("*") if p.is_file() and p != d / RECORD}
         problems += [f"{rel}: not in the record" for rel in sorted(present - set(files))]
         return problems
@@ -622,7 +623,7 @@ def _seal(writer: StageWriter, inputs: dict[str, str | None]) -> None:
     files = {}
     for p in sorted(d.rglob("*")):
         if p.is_file() and p != d / RECORD:
-            files[str(Path(STAGE_DIRS[writer.stage]) / p.relative_to(d))] = _sha256(p)
+            files[str(Path(STAGE_DIRS[writer.stage]) / p.relative_to(d))] = sha256_file(p)
     record = {"stage": writer.stage, "completed_utc": _now(), "rmbuild_version": __version__,
               "schema_version": SCHEMA_VERSION, "inputs": inputs, "files": files}
     write_json_atomic(d / RECORD, record)

@@ -15,7 +15,6 @@ built with and the floor task's result. A re-run of `build` without ``--force``:
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -28,7 +27,7 @@ from rmbuild import __version__
 from rmbuild.errors import WorkspaceError
 from rmbuild.io.atomic import replacing_dir, write_json_atomic
 from rmbuild.io.lock import workspace_lock
-from rmbuild.io.workspace import Workspace, building_floors
+from rmbuild.io.workspace import Workspace, building_floors, sha256_file
 
 #: the floor-task stages whose records a complete floor has ("evaluate" too when its result has it)
 FLOOR_STAGES = ("optimize", "map")
@@ -61,7 +60,7 @@ def input_fingerprint(inputs: list[str | Path], settings: dict[str, Any], old: d
         st = f.stat()
         prev = before.get(key)
         same = isinstance(prev, list) and len(prev) == 3 and prev[:2] == [st.st_size, st.st_mtime_ns]
-        files[key] = [st.st_size, st.st_mtime_ns, prev[2] if same else _sha256(f)]
+        files[key] = [st.st_size, st.st_mtime_ns, prev[2] if same else sha256_file(f)]
     return {"files": files, "settings": settings, "rmbuild_version": __version__}
 
 
@@ -151,10 +150,3 @@ def _input_files(inputs: list[str | Path]) -> list[tuple[str, Path]]:
             out.append((f"{i}:{p.name}", p))
     return out
 
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
