@@ -251,6 +251,37 @@ def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
     assert refute(placement(true_T), walks, sim) == []  # placed where they belong: nothing refuted
 
 
+def test_rf_check_judges_a_walk_by_the_map_it_was_placed_onto():
+    """Four walks of a corridor 40 m away placed together onto a map of two corridors (walks 0-1 and 2-3):
+    each has more of its wrong companions near it than of the map, so judged against all the others they
+    vouch for each other and outvote a right walk; judged against the walks placed before them (the order
+    of placement) they are refuted and the map's walks kept."""
+    from types import SimpleNamespace
+
+    from rmbuild.slam.placement.rfcheck import refute
+    from rmbuild.slam.rfmodel import RFModel
+
+    per, n = 30, 8
+    line = np.c_[np.linspace(0, 29, per), np.zeros(per)]
+    walk_of = np.repeat(np.arange(n), per)
+    walks = walk_set(np.c_[np.vstack([line] * n), np.zeros(n * per)], walk_of)
+    true_y = np.array([0, 1, 80, 81, 40, 41, 40.5, 39.5])
+    true_T = np.c_[np.zeros(n), true_y, np.zeros(n)]
+    placed_T = true_T - np.c_[np.zeros(n), 40.0 * (np.arange(n) >= 4), np.zeros(n)]
+    nodes = np.arange(n * per)
+    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes), walk_of), row_node=nodes, min_common=3,
+                          rf=RFModel(22.0, 3.0, 32.0, 4.0))
+
+    def placement(order):
+        return Placement(placed_T.copy(), np.zeros(n, np.int64), 0, np.zeros(n, bool),
+                         np.array([""] * n, dtype=object), order=order)
+
+    assert refute(placement(None), walks, sim) == [1]  # without the order the group outvotes the map
+    pl = placement(np.array([1, 2, 2, 2, 3, 3, 3, 3]))  # walks 4-7 placed in one round after the others
+    assert sorted(refute(pl, walks, sim)) == [4, 5, 6, 7]
+    assert (pl.component[:4] == 0).all() and (pl.component[4:] > 0).all()
+
+
 def test_a_walk_its_compass_misplaces_is_left_unlinked_not_placed_wrong():
     """A walk whose compass is 90 deg off is fitted with that rotation ~60 m from where it was (the others'
     error stays 0.7 m): the RF check leaves it unlinked, reported as refuted, instead of in the map."""

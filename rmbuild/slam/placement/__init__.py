@@ -107,7 +107,8 @@ def _grow_from(ref: int, walks: WalkSet, links: Links, rot: RotationPriors, sim,
     st = orient_components(st, rot)
     scan_links = (np.concatenate(lk_all), np.concatenate(lq_all)) if lk_all else None
     return Placement(st.T, st.comp, ref, st.heading_used & rot.known, st.method, links=scan_links,
-                     gate_m=cfg.gate_m, log=log, round_placed=st.rnd, n_inliers=st.n_inl, shared_m=st.shared)
+                     gate_m=cfg.gate_m, log=log, round_placed=st.rnd, n_inliers=st.n_inl, shared_m=st.shared,
+                     order=st.order)
 
 
 def origin_placement(walks: WalkSet, links: Links, reference: int | None) -> Placement:

@@ -125,6 +125,7 @@ def grow(st: GrowState, ev: GrowthEvidence, walks: WalkSet, rot: RotationPriors,
             new = ev.round(st, placed, free, prior, c_id, r, log)
             if not new:
                 break
+            st.tick()
             for w, f in new:
                 st.place(w, f, c_id, r)
                 placed[w] = True
@@ -224,8 +225,9 @@ class ScanEvidence(GrowthEvidence):
         """A state that keeps component 0 of ``st`` (the map to extend) and frees every other walk."""
         start = st.comp == 0
         st2 = GrowState.empty(self.walks.n_walks, st.reference, rot.known)
-        for a in ("T", "rnd", "n_inl", "shared", "method", "heading_used"):
+        for a in ("T", "rnd", "n_inl", "shared", "method", "heading_used", "order"):
             getattr(st2, a)[start] = getattr(st, a)[start]
+        st2.epoch = st.epoch
         self._start = start
         return st2
 

@@ -52,6 +52,7 @@ def link_components(st: GrowState, walks: WalkSet, ties: Ties, links: Links, rot
         members = st.comp == move
         st.T[members, :2] += delta
         st.method[members] = "continuity"
+        st.order[members] = st.tick()
         st.comp[members] = stay
         used += 1
     _, st.comp = np.unique(np.where(st.comp == st.comp[st.reference], -1, st.comp), return_inverse=True)

@@ -86,6 +86,7 @@ def _merge_one(st: GrowState, walks: WalkSet, nk: np.ndarray, nq: np.ndarray, ro
     st.T[members] = geometry.compose(f.t, st.T[members])
     st.comp[members] = d
     st.method[members] = "merge"
+    st.order[members] = st.tick()
     if f.method == "se2":
         st.heading_used[members] = False
     return True

@@ -23,8 +23,9 @@ class WalkFit:
 @dataclass
 class GrowState:
     """The placement while it grows: per walk its frame, component (-1 = not yet placed), the round it was
-    placed in, its inlier count and shared path at placement, how it was placed, and whether its compass
-    rotation is trusted."""
+    placed in, its inlier count and shared path at placement, how it was placed, whether its compass
+    rotation is trusted, and when it was placed (``order``: the placement event, -1 never; walks placed
+    together by one round, merge or tie share one; ``epoch`` the latest event)."""
 
     T: np.ndarray
     comp: np.ndarray
@@ -34,24 +35,33 @@ class GrowState:
     method: np.ndarray
     heading_used: np.ndarray
     reference: int
+    order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    epoch: int = 0
 
     @staticmethod
     def empty(n_walks: int, reference: int, heading_known: np.ndarray) -> GrowState:
         return GrowState(np.zeros((n_walks, 3)), np.full(n_walks, -1), np.full(n_walks, -1),
                          np.zeros(n_walks, np.int64), np.zeros(n_walks), np.full(n_walks, "", dtype=object),
-                         heading_known.copy(), reference)
+                         heading_known.copy(), reference, np.full(n_walks, -1, np.int64))
+
+    def tick(self) -> int:
+        """Start a new placement event (the walks placed next share it)."""
+        self.epoch += 1
+        return self.epoch
 
     def place(self, w: int, f: WalkFit, c_id: int, rnd: int) -> None:
         self.T[w] = f.t
         self.comp[w], self.rnd[w], self.n_inl[w] = c_id, rnd, f.score
         self.shared[w], self.method[w] = f.shared_m, f.method
+        self.order[w] = self.epoch
 
     def seed(self, w: int, c_id: int) -> None:
         self.comp[w], self.rnd[w], self.method[w], self.T[w] = c_id, 0, "seed", (0.0, 0.0, 0.0)
+        self.order[w] = self.tick()
 
     def copy(self) -> GrowState:
         return GrowState(self.T.copy(), self.comp.copy(), self.rnd.copy(), self.n_inl.copy(), self.shared.copy(),
-                         self.method.copy(), self.heading_used.copy(), self.reference)
+                         self.method.copy(), self.heading_used.copy(), self.reference, self.order.copy(), self.epoch)
 
 
 @dataclass
@@ -71,7 +81,8 @@ class Placement:
     ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
     ``round_placed`` / ``n_inliers`` / ``shared_m`` (n_walks,): the growth round a walk was placed in (-1
     never, 0 for seeds), its inlier scans and shared path (m) then; ``refuted`` the walks the RF check
-    (:mod:`.rfcheck`) took out of the reference component.
+    (:mod:`.rfcheck`) took out of the reference component; ``order`` (n_walks,) the placement event that put
+    each walk where it is (:class:`GrowState`).
     """
 
     world_T_walk: np.ndarray
@@ -93,6 +104,7 @@ class Placement:
     n_inliers: np.ndarray | None = None
     shared_m: np.ndarray | None = None
     refuted: list[int] = field(default_factory=list)
+    order: np.ndarray | None = None
 
     @property
     def linked(self) -> np.ndarray:

@@ -9,8 +9,10 @@ these over the overlapping scans. Calibrated per data set by the RF model, it me
 A phone with another gain looks far from everything; each walk's distances are reduced first by how much
 further its best matches in other walks are than the median walk's.
 
-:func:`refute` applies it to the solved poses: each linked walk against the rest of the reference
-component; a walk the overlap contradicts is left unlinked (out of the map) rather than kept at a wrong place.
+:func:`refute` applies it to the solved poses: each linked walk against the walks of the reference component
+placed before it (the map it was fitted to; walks placed in one round, merge or tie count as one), so that a
+group of walks placed wrong together, or onto each other, does not vouch for itself; a walk the overlap
+contradicts is left unlinked (out of the map) rather than kept at a wrong place.
 (Applied to the placement before the solve it also refuted walks the solve puts right; applied inside growth,
 refusing each fit as it is made, it changed which walks seed the later merges and cost MS ILC site1/F2 23
 linked walks; docs/optimize.md.)
@@ -49,19 +51,23 @@ MAX_REFUTED_SHARE = 0.5
 def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
     """Walks of the reference component whose placement the RF check contradicts, worst first: each is moved
     into a component of its own (unlinked, kept where it is) and the rest judged again without it, as walks
-    placed onto a wrong one agree with it and a right walk can be outvoted by wrong ones laid over it.
+    placed onto a wrong one agree with it. Each walk is judged against the walks placed before it
+    (``placement.order``; all the others when the placement has no order).
     Returns them in that order. The reference walk is kept. ``row_xy``: each fingerprint row's position
     (default: where the placement puts it)."""
     check = OverlapCheck(walks, sim)
     comp = placement.component
     xy = walks.world_xy(placement.world_T_walk, sim.row_node) if row_xy is None else row_xy
     out: list[int] = []
-    while len(out) < MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1):
+    most = MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1)
+    while len(out) < most:
         worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
         for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
             if w == placement.reference:
                 continue
             others = np.flatnonzero((comp[check.row_walk] == 0) & (check.row_walk != w))
+            if placement.order is not None:  # the map the walk was placed onto, not walks placed onto it
+                others = others[placement.order[check.row_walk[others]] < placement.order[w]]
             ev = check.evidence(w, xy[check.rows_of[w]], others, xy[others])
             if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
                 worst, worst_llr = w, ev.mean_log_lr
