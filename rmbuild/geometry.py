@@ -21,6 +21,17 @@ def wrap(a):
     return np.angle(np.exp(1j * np.asarray(a, dtype=float)))
 
 
+def circular_mean(a) -> float:
+    """Circular mean (rad, in [-pi, pi)) of the angles ``a``: the argument of the mean resultant vector
+    (Mardia & Jupp, Directional Statistics, Wiley 1999, eq. 2.2.4); NaN for none. The same floating-point
+    operations as ``scipy.stats.circmean(a, high=pi, low=-pi)``, whose module costs ~1.5 s at import."""
+    a = np.asarray(a, dtype=float).ravel()
+    if a.size == 0:
+        return float("nan")
+    res = np.arctan2(np.sin(a).sum(), np.cos(a).sum())
+    return float((res * 1.0 + np.pi) % (2.0 * np.pi) - np.pi)
+
+
 def rot(theta: float) -> np.ndarray:
     """The (2, 2) rotation matrix of angle ``theta`` (rad)."""
     c, s = np.cos(theta), np.sin(theta)

@@ -258,3 +258,35 @@ def test_localizing_walks_of_the_map_warns(venue: Path, tmp_path: Path, capsys) 
     assert r.code == 0 and "among the map's own walks (w004)" in r.err
     r = run_cli(capsys, "localize", "-w", venue / "ws_map", venue / "test_in", "-o", tmp_path / "q.csv")
     assert r.code == 0 and "own walks" not in r.err
+
+
+@pytest.mark.parametrize("name", ["knn", "wknn"])
+def test_localize_hold_out_gives_evaluates_per_scan_errors(venue: Path, tmp_path: Path, capsys, name: str) -> None:
+    """`localize --hold-out` of a workspace's test walks (re-read from their input files) gives the per-scan
+    positions and errors `evaluate --test-walks` gives them on the workspace's built map."""
+    ws = venue / "ws_all"
+    from rmbuild.config import EvaluateConfig
+    from rmbuild.evaluate.localization import evaluate
+    from rmbuild.io.map_store import read_map_config
+    from rmbuild.stages.mapping import built_positions
+
+    w = Workspace.open(ws)
+    ds, fp, mcfg = w.read_dataset(), w.read_fingerprints(), read_map_config(w)
+    xy, info = built_positions(w, ds, mcfg)
+    res = evaluate(ds, fp, xy, EvaluateConfig(localizers=(name,)), test_walks=["w004"], gauge=info["gauge"],
+                   map_cfg=mcfg)
+    out = tmp_path / "pos.parquet"
+    r = run_cli(capsys, "localize", "-w", ws, venue / "test_in", "-o", out, "--localizer", name, "--hold-out")
+    assert r.code == 0, r.err
+    assert "own walks" not in r.err and "evaluate's built map of the other 4 walks" in r.out
+    table = pd.read_parquet(out)
+    np.testing.assert_allclose(table["t_s"], res.query.t_s)
+    np.testing.assert_allclose(table[["x_m", "y_m"]].to_numpy(), res.predictions["built"][name], atol=1e-9)
+    np.testing.assert_allclose(table["error_m"], res.errors["built"][name], atol=1e-9)
+    assert table["error_m"].notna().sum() == res.stats["built"][name]["n"] == 13
+
+
+def test_localize_hold_out_needs_workspace_walks(venue: Path, tmp_path: Path, capsys) -> None:
+    r = run_cli(capsys, "localize", "-w", venue / "ws_map", venue / "test_in", "-o", tmp_path / "p.csv",
+                "--hold-out")
+    assert r.code == 2 and r.err.count("\n") == 1 and "input walk 'w004' is not a walk of the workspace" in r.err

@@ -22,11 +22,14 @@ from rmbuild.localize.registry import describe, localizer_names
               help=FORMAT_HELP + " Bare scans (a wifi table without poses) are rmbuild's schema.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="TOML file whose [evaluate] table configures the localizers; unknown keys are errors.")
+@click.option("--hold-out", "hold_out", is_flag=True,
+              help="INPUTS are walks of the workspace: localize them against evaluate's built map of its other "
+                   "walks (not the exported map), scored as `evaluate --test-walks` scores them.")
 @floor_option
 @click.option("--force", is_flag=True, help="Replace an existing output file.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress or summary: only warnings and errors.")
 @click.option("-v", "--verbose", count=True, help="More log output (-vv for debug).")
-def localize(inputs, workspace, out, localizer, fmt, config_path, floor, force, quiet, verbose):
+def localize(inputs, workspace, out, localizer, fmt, config_path, hold_out, floor, force, quiet, verbose):
     """Localize new walks or bare scans in INPUTS against the workspace's radio map (read-only)."""
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -36,7 +39,7 @@ def localize(inputs, workspace, out, localizer, fmt, config_path, floor, force, 
     cfg = load_stage_config("evaluate", config_path)
     with progress_display(quiet, verbose) as progress:
         r = stage.run(workspace, list(inputs), out, cfg, localizer=localizer, fmt=fmt, force=force,
-                      progress=progress, floor=floor)
+                      progress=progress, floor=floor, hold_out=hold_out)
     if quiet:
         return
     kind = " (bare scans: no steps)" if r["input_kind"] == "scans" else ""

@@ -285,13 +285,50 @@ def evaluate(
     map_cfg = map_cfg or MapConfig()
     built_xy = _checked_inputs(dataset, built_xy, cfg, map_cfg, gauge)
     map_walks, test, rule = split_walks(dataset, cfg, test_walks)
+    em = evaluation_maps(dataset, fingerprints, built_xy, map_walks, gauge, map_cfg)
+    maps, alignment, unavailable, src = em.maps, em.alignment, em.unavailable, em.reference_source
+    bssids = np.asarray(fingerprints.bssids, dtype=object)
+    query = Query.from_dataset(dataset, test, bssids, unit=cfg.query)
+    if len(query) == 0:
+        raise InputError("the test walks have no Wi-Fi scans")
+    q_ref = query_reference_xy(dataset, query)
+    q_node = query.node
+    q_built = np.where((q_node >= 0)[:, None], em.built_xy[np.maximum(q_node, 0)], np.nan)
 
+    stats, errors, preds, consistency = _localize_all(maps, cfg, query, q_ref, q_built, src is not None, progress)
+    if src is None:
+        stats, errors = {}, {}
+    return EvalResult(
+        gauge=gauge, test_walks=test, map_walks=map_walks, split_rule=rule, reference_source=src,
+        stats=stats, errors=errors, predictions=preds, query=query, query_ref_xy=q_ref, alignment=alignment,
+        unavailable=unavailable, consistency=consistency, maps=maps, localizers=list(cfg.localizers),
+    )
+
+
+@dataclass
+class EvaluationMaps:
+    """What :func:`evaluation_maps` builds: ``maps`` (name -> RadioMap, :data:`MAP_NAMES` that could be
+    built), ``built_xy`` (n_nodes, 2) the optimised positions in the frame the built map is in (after the
+    gauge's SE(2) when there is one), ``alignment`` and ``unavailable`` (as in :class:`EvalResult`), and
+    the reference positions' source (None: no ground truth)."""
+
+    maps: dict[str, RadioMap]
+    built_xy: np.ndarray
+    alignment: dict
+    unavailable: dict[str, str]
+    reference_source: str | None
+
+
+def evaluation_maps(dataset: Dataset, fingerprints: Fingerprints, built_xy: np.ndarray, map_walks: list[str],
+                    gauge: str, map_cfg: MapConfig) -> EvaluationMaps:
+    """The built / surveyed / raw maps of the walks ``map_walks`` on one grid (common origin) and AP list
+    (``fingerprints.bssids``), with the gauge of the module docstring. `rmbuild localize --hold-out` builds
+    evaluate's built map through here. Raises InputError when the map walks have no readings."""
     unavailable: dict[str, str] = {}
     ref_xy, src = reference_positions(dataset)
     walk_of_node = dataset.poses["walk_id"].astype(str).to_numpy()
     map_nodes = np.flatnonzero(np.isin(walk_of_node, map_walks))
     raw_xy = dataset.poses[["x_m", "y_m"]].to_numpy(dtype=float)
-
     alignment: dict = {"built": gauge, "raw": "none"}
     built_al = built_xy
     if src is None:
@@ -309,41 +346,23 @@ def evaluate(
         raw_xy = _apply(r, t, raw_xy)
         alignment["raw"] = "se2"
         alignment["raw_se2"] = info
-
     positions = {"built": built_al, "raw": raw_xy}
     if src is not None:
         positions["surveyed"] = ref_xy
-    stack = np.vstack([p[map_nodes] for p in positions.values()])
-    origin = grid_origin(stack, map_cfg.cell_size_m)
+    origin = grid_origin(np.vstack([p[map_nodes] for p in positions.values()]), map_cfg.cell_size_m)
     wifi = dataset.wifi[dataset.wifi["walk_id"].astype(str).isin(set(map_walks))]
     wifi = wifi[pd.to_numeric(wifi["node"], errors="coerce").notna()]
     if len(wifi) == 0:
         raise InputError("the map walks have no Wi-Fi readings attached to nodes")
-    node_walk = walk_of_node
     bssids = np.asarray(fingerprints.bssids, dtype=object)
     maps: dict[str, RadioMap] = {}
     for name in MAP_NAMES:
         if name not in positions:
             continue
         frame = "building" if (name == "surveyed" or alignment.get(name) in (*BUILDING_FRAME_GAUGES, "se2")) else ""
-        maps[name] = build_radio_map(wifi, positions[name], node_walk, map_cfg, origin, bssids=bssids,
+        maps[name] = build_radio_map(wifi, positions[name], walk_of_node, map_cfg, origin, bssids=bssids,
                                      frame=frame)
-
-    query = Query.from_dataset(dataset, test, bssids, unit=cfg.query)
-    if len(query) == 0:
-        raise InputError("the test walks have no Wi-Fi scans")
-    q_ref = query_reference_xy(dataset, query)
-    q_node = query.node
-    q_built = np.where((q_node >= 0)[:, None], built_al[np.maximum(q_node, 0)], np.nan)
-
-    stats, errors, preds, consistency = _localize_all(maps, cfg, query, q_ref, q_built, src is not None, progress)
-    if src is None:
-        stats, errors = {}, {}
-    return EvalResult(
-        gauge=gauge, test_walks=test, map_walks=map_walks, split_rule=rule, reference_source=src,
-        stats=stats, errors=errors, predictions=preds, query=query, query_ref_xy=q_ref, alignment=alignment,
-        unavailable=unavailable, consistency=consistency, maps=maps, localizers=list(cfg.localizers),
-    )
+    return EvaluationMaps(maps, built_al, alignment, unavailable, src)
 
 
 def _checked_inputs(dataset: Dataset, built_xy: np.ndarray, cfg: EvaluateConfig, map_cfg: MapConfig,

@@ -58,6 +58,27 @@ def interpolate_xy(poses: pd.DataFrame, walk_id: str, t_s: np.ndarray) -> np.nda
     return out
 
 
+def estimates_at_fixes(poses: pd.DataFrame, fix_walk: np.ndarray, fix_t: np.ndarray) -> np.ndarray:
+    """Positions (n_fixes, 2) of ``poses`` at each fix's walk and time, as :func:`interpolate_xy` gives them
+    walk by walk (NaN outside a walk's span or for an unknown walk); the poses are grouped once."""
+    est = np.full((len(fix_walk), 2), np.nan)
+    rows = pd.Series(np.arange(len(poses))).groupby(poses["walk_id"].astype(str).to_numpy(), sort=False).indices
+    t = poses["t_s"].to_numpy(dtype=float)
+    xy = poses[["x_m", "y_m"]].to_numpy(dtype=float)
+    for wid in np.unique(fix_walk):
+        r = rows.get(str(wid))
+        if r is None or len(r) == 0:
+            continue
+        m = fix_walk == wid
+        tt, ft = t[r], fix_t[m]
+        inside = (ft >= tt[0]) & (ft <= tt[-1])
+        out = np.full((len(ft), 2), np.nan)
+        for j in range(2):
+            out[inside, j] = np.interp(ft[inside], tt, xy[r, j])
+        est[m] = out
+    return est
+
+
 def landmark_error(
     poses: pd.DataFrame, fixes: pd.DataFrame, world_R: np.ndarray | None = None, world_t: np.ndarray | None = None
 ) -> dict[str, float] | None:
@@ -69,12 +90,7 @@ def landmark_error(
     """
     if fixes is None or len(fixes) == 0:
         return None
-    est = np.full((len(fixes), 2), np.nan)
-    fw = fixes["walk_id"].astype(str).to_numpy()
-    ft = fixes["t_s"].to_numpy(dtype=float)
-    for wid in np.unique(fw):
-        m = fw == wid
-        est[m] = interpolate_xy(poses, wid, ft[m])
+    est = estimates_at_fixes(poses, fixes["walk_id"].astype(str).to_numpy(), fixes["t_s"].to_numpy(dtype=float))
     if world_R is not None:
         est = est @ np.asarray(world_R).T + (0 if world_t is None else np.asarray(world_t))
     ok = np.isfinite(est).all(axis=1)
@@ -140,12 +156,8 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
             use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
             world_R, world_t = align_se2(est[use], tru[use])
         elif fixes is not None and len(fixes) >= 2:
-            ft = fixes["t_s"].to_numpy(float)
-            est = np.full((len(fixes), 2), np.nan)
             fw = fixes["walk_id"].astype(str).to_numpy()
-            for wid in np.unique(fw):
-                m = fw == wid
-                est[m] = interpolate_xy(poses_df, wid, ft[m])
+            est = estimates_at_fixes(poses_df, fw, fixes["t_s"].to_numpy(float))
             ok = np.isfinite(est).all(axis=1)
             if fit_walks is not None:
                 named = ok & np.isin(fw, [str(w) for w in fit_walks])

@@ -35,7 +35,6 @@ from dataclasses import dataclass, replace
 import gtsam
 import numpy as np
 import pandas as pd
-from scipy.stats import circmean
 
 from rmbuild import geometry
 from rmbuild.config.optimize import OptimizeConfig
@@ -330,7 +329,7 @@ def map_rotation_priors(rot: RotationPriors, held: np.ndarray) -> np.ndarray:
     ok = held & rot.known
     if not ok.any():
         return np.full(len(rot.theta), np.nan)
-    map_rot = float(circmean(rot.theta[ok], high=np.pi, low=-np.pi))
+    map_rot = float(geometry.circular_mean(rot.theta[ok]))
     return np.where(rot.known, geometry.wrap(rot.theta - map_rot), np.nan)
 
 
@@ -425,7 +424,7 @@ def _heading_nodes(mw: WalkSet, walks: np.ndarray, cfg: OptimizeConfig) -> np.nd
 def _map_compass_rotation(rot: RotationPriors, held: np.ndarray) -> float:
     """The map frame's rotation in the compass world: the circular mean over the held walks with a compass."""
     ok = held & rot.known
-    return float(circmean(rot.theta[ok], high=np.pi, low=-np.pi)) if ok.any() else 0.0
+    return float(geometry.circular_mean(rot.theta[ok])) if ok.any() else 0.0
 
 
 def _pairs_table(mw: WalkSet, s: _Solved, init_xyt: np.ndarray, cfg: OptimizeConfig) -> pd.DataFrame:

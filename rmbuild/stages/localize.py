@@ -10,6 +10,13 @@ into the map's frame and each scan's error is written beside its estimate:
 * map in a walk's frame: by the one SE(2) that maps the workspace's optimised node positions onto its
   own reference positions (fitted on every placed node, as `evaluate` fits its gauge), inverted;
 * otherwise (no ground truth in the workspace) errors are not computed, and the report says why.
+
+``hold_out``: the input walks are walks of the workspace (the ones `evaluate` tests, say). The exported map
+is then not used: the map is `evaluate`'s "built" map of the workspace's *other* walks
+(:func:`rmbuild.evaluate.localization.evaluation_maps`: the optimised positions of those walks, the gauge's
+SE(2) to the truth, the same grid and AP list), so the scans of the given walks are localized and scored
+exactly as `evaluate --test-walks` scores them. Positions are then in the frame evaluate scores in (the
+building's, or the truth's after the SE(2)).
 """
 
 from __future__ import annotations
@@ -57,11 +64,13 @@ def run(
     force: bool = False,
     progress: Progress | None = None,
     floor: str | None = None,
+    hold_out: bool = False,
 ) -> dict:
     """Localize ``inputs`` against ``workspace``'s map (a building's: the map of ``floor``), write per-scan
     positions to ``out`` (CSV or Parquet by suffix); returns the report (errors under "errors" when the
     input has ground truth). ``out`` ending in .geojson: a FeatureCollection, when the map is georeferenced
-    (:mod:`rmbuild.stages.localize_geojson`)."""
+    (:mod:`rmbuild.stages.localize_geojson`). ``hold_out``: against evaluate's built map of the workspace's
+    other walks (module docstring)."""
     from rmbuild.evaluate.localization import error_stats, query_reference_xy
     from rmbuild.localize.apply import localize_query, positions_table
     from rmbuild.localize.base import Query, localizer_class
@@ -73,11 +82,16 @@ def run(
     progress = ensure_progress(progress)
     t0 = time.perf_counter()
     with locked_workspace(workspace, "localize", exclusive=False) as ws:
-        rm = _read_map(ws)
-        geo = _georef(ws, rm, out, floor)
+        if not hold_out:
+            rm = _read_map(ws)
+            geo = _georef(ws, rm, out, floor)
         progress.phase("reading the input")
         new = read_input(inputs, fmt, *ingest_configs(ws))
         ds = new.dataset
+        if hold_out:
+            progress.phase("building the map of the other walks")
+            rm, hold_note = held_out_map(ws, ds)
+            geo = _georef(ws, rm, out, floor)
         query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
         if new.kind == "scans":
             query.steps = None
@@ -85,8 +99,11 @@ def run(
             raise InputError("the input has no Wi-Fi scans", ", ".join(map(str, inputs)))
         ref = query_reference_xy(ds, query)
         has_truth = bool(np.isfinite(ref).all(axis=1).any())
-        to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
-    warnings = _overlap_warning(ds, rm)
+        if hold_out:
+            to_map, frame_note = ((lambda xy: xy), hold_note) if rm.frame == "building" else (None, hold_note)
+        else:
+            to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
+    warnings = [] if hold_out else _overlap_warning(ds, rm)
     for w in warnings:
         log.warning(w)
     progress.phase(f"localizing {len(query)} scans with {name}")
@@ -96,7 +113,7 @@ def run(
     report = {
         "stage": "localize", "workspace": str(ws.root), "inputs": [str(p) for p in inputs], "output": str(out),
         "input_kind": new.kind, "format": new.reader, "walks": len(ds.walks), "scans": len(query),
-        "localizer": name, "map_frame": rm.frame, "map_aps": len(rm.bssids),
+        "localizer": name, "map_frame": rm.frame, "map_aps": len(rm.bssids), "hold_out": hold_out,
         "scans_without_map_aps": int((res.n_aps == 0).sum()),
         "unlocalized": int((~np.isfinite(res.xy).all(axis=1)).sum()),
         "uncertainty_m_median": _median(res.uncertainty_m), "localizer_summary": res.summary,
@@ -105,6 +122,39 @@ def run(
         "warnings": warnings, "time_s": round(time.perf_counter() - t0, 3),
     }
     return report
+
+
+def held_out_map(ws: Workspace, new: Dataset) -> tuple[RadioMap, str]:
+    """Evaluate's built map of the workspace's walks other than ``new``'s (all of which must be workspace
+    walks), and a note on its frame. InputError when an input walk is not one of the workspace's."""
+    from rmbuild.evaluate.localization import evaluation_maps
+    from rmbuild.io.map_store import read_map_config
+    from rmbuild.stages.mapping import built_positions
+
+    ds, fp = ws.read_dataset(), ws.read_fingerprints()
+    known = ds.walks["walk_id"].astype(str).tolist()
+    given = set(new.walks["walk_id"].astype(str))
+    unknown = sorted(given - set(known))
+    if unknown:
+        raise InputError(f"--hold-out: input walk {unknown[0]!r} is not a walk of the workspace (hold-out "
+                         "localizes a workspace's own walks against a map of its other walks)", str(ws.root))
+    map_walks = [w for w in known if w not in given]
+    if not map_walks:
+        raise InputError("--hold-out: every walk of the workspace is in the input: no walks left for the map",
+                         str(ws.root))
+    map_cfg = read_map_config(ws)
+    xy, info = built_positions(ws, ds, map_cfg)
+    em = evaluation_maps(ds, fp, xy, map_walks, info["gauge"], map_cfg)
+    se2 = em.alignment.get("built_se2")
+    if se2:
+        note = (f"evaluate's built map of the other {len(map_walks)} walks: SE(2) from their placed nodes to the "
+                f"truth (residual RMS {se2['residual_rms_m']:.2f} m), positions in the truth's frame")
+    elif em.maps["built"].frame == "building":
+        note = f"evaluate's built map of the other {len(map_walks)} walks, in the building frame as placed"
+    else:
+        note = (f"evaluate's built map of the other {len(map_walks)} walks, in its own frame: the workspace has "
+                "no ground truth to relate it to the building's, errors not computed")
+    return em.maps["built"], note
 
 
 def _overlap_warning(ds: Dataset, rm: RadioMap) -> list[str]:

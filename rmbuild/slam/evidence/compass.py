@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
-from scipy.stats import circmean
 
+from rmbuild import geometry
 from rmbuild.config.optimize import CompassConfig
 from rmbuild.slam.evidence.base import EvidenceSource, RotationPriors, StaticFactors
 from rmbuild.slam.factors import X
@@ -85,7 +85,7 @@ def walk_rotations(walks: WalkSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d = walks.yaw_abs[s:e] - walks.raw[s:e, 2]
         ok = np.isfinite(d)
         if ok.any():
-            th[w] = circmean(d[ok], high=np.pi, low=-np.pi)
+            th[w] = geometry.circular_mean(d[ok])
             known[w] = True
             n_ind = max(1.0, ok.sum() / ABS_HEADING_CORR_STEPS)
             sig[w] = max(ABS_HEADING_SIGMA_RAD, float(np.median(walks.yaw_sigma[s:e][ok])) / np.sqrt(n_ind))
@@ -95,5 +95,5 @@ def walk_rotations(walks: WalkSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def component_compass_offset(T: np.ndarray, walks: np.ndarray, rot: RotationPriors, ref: int) -> float:
     """Rotation (rad) that takes a component's frame to the reference's by the compass: the circular mean
     over ``walks`` (bool, trusted compass) of theta[w] - theta[ref] - T[w, 2]."""
-    return float(circmean(rot.theta[walks] - rot.theta[ref] - T[walks, 2], high=np.pi, low=-np.pi))
+    return float(geometry.circular_mean(rot.theta[walks] - rot.theta[ref] - T[walks, 2]))
 

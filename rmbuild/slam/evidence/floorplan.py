@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
-from scipy import ndimage, signal
 
 from rmbuild import geometry
 from rmbuild.floorplan import FloorPlan
@@ -174,6 +173,8 @@ def _correlate(mask: np.ndarray, origin: np.ndarray, p: np.ndarray):
     ij = np.floor((p - lo) / PLAN_CELL_M).astype(int)
     occ = np.zeros((ij[:, 1].max() + 1, ij[:, 0].max() + 1))
     np.add.at(occ, (ij[:, 1], ij[:, 0]), 1.0)
+    from scipy import signal  # imported here: scipy.signal costs ~1 s at import, and most runs use no plan
+
     score = signal.fftconvolve(mask.astype(float), occ[::-1, ::-1], mode="valid")
 
     def shift(cell) -> np.ndarray:  # translation putting p's raster cell (0, 0) (its centre) on mask sample ``cell``
@@ -192,6 +193,8 @@ def nearest_walkable(plan: FloorPlan, xy: np.ndarray) -> np.ndarray:
     if not len(xy):
         return np.zeros((0, 2))
     grid, (ox, oy), res = plan.distance_field()
+    from scipy import ndimage
+
     _, (ri, ci) = ndimage.distance_transform_edt(grid > 0, return_indices=True)
     r = np.clip(np.rint((xy[:, 1] - oy) / res).astype(int), 0, grid.shape[0] - 1)
     c = np.clip(np.rint((xy[:, 0] - ox) / res).astype(int), 0, grid.shape[1] - 1)
