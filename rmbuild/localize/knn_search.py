@@ -6,7 +6,8 @@ cut into blocks of :data:`RP_BLOCK`; a block's RPs detect few APs between them (
 preset), so ``−2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only. ``‖a_r‖²`` is
 precomputed; ``‖a_q‖²`` is a per-query constant and does not change the ranking. A few queries at a time
 (one-at-a-time localization) go one by one: one float32 vector-matrix product over the rows (APs) of
-``−2 aᵀ`` the query detects, in the original RP order, and one ``argpartition``. (An inverted index — per AP,
+``−2 aᵀ`` the query detects, in the original RP order, and one ``partition`` (the caller re-ranks over
+the query's detected APs only, :meth:`KnnLocalizer._kneighbors_few`). (An inverted index — per AP,
 the RPs detecting it — with a weighted ``bincount`` over the query's postings was 2-3x slower: a query's APs
 are the common ones, ~90k postings of 1.6M entries, and the scattered sums cost more than the dense rows.)
 
@@ -78,14 +79,16 @@ class SparseL2Shortlist:
             cols = np.flatnonzero((ap[s:e] != 0).any(axis=0))
             self.blocks.append((s, e, cols, np.ascontiguousarray(-2.0 * ap[s:e][:, cols])))
 
-    def _one(self, aq: np.ndarray, c: int) -> np.ndarray:
-        """(c,) RP indices holding the ``c`` nearest of one query row ``aq`` (n_ap,), ties aside."""
+    def one(self, cols: np.ndarray, vals: np.ndarray, c: int) -> np.ndarray:
+        """(c,) RP indices holding the ``c`` nearest of one query, ties aside: the query detects the AP columns
+        ``cols`` with ``vals`` = rss − fill; one float32 vector-matrix product over those rows of ``−2 aᵀ``."""
         if c >= self.n_rp:
             return np.arange(self.n_rp)
-        cols = np.flatnonzero(aq)
-        d = aq[cols].astype(np.float32) @ self.wt[cols]
+        d = vals.astype(np.float32) @ self.wt[cols]
         d += self.sq_orig
-        return np.argpartition(d, c - 1)[:c]
+        kth = np.partition(d, c - 1)[c - 1]  # the c-th value: faster than argpartition (see smallest)
+        j = np.flatnonzero(d <= kth)
+        return j if len(j) == c else np.argpartition(d, c - 1)[:c]
 
     def _distances(self, aq: np.ndarray) -> np.ndarray:
         """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding)."""
@@ -110,9 +113,10 @@ class SparseL2Shortlist:
         def run(s: int) -> None:
             out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
 
-        if nq <= FEW_QUERIES:  # the inverted index, query by query: no BLAS, no blocks
+        if nq <= FEW_QUERIES:  # query by query: no BLAS threads, no blocks
             for i in range(nq):
-                out[i] = self._one(aq[i], c)
+                cols = np.flatnonzero(aq[i])
+                out[i] = self.one(cols, aq[i, cols], c)
             return out
         with one_blas_thread():
             if len(starts) > 1 and THREADS > 1:
