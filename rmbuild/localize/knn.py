@@ -22,7 +22,7 @@ import numpy as np
 
 from rmbuild.config.evaluate import EvaluateConfig, KnnConfig
 from rmbuild.localize.base import Query, ReferenceSet, as_reference
-from rmbuild.localize.knn_search import FEW_QUERIES, SparseL2Shortlist
+from rmbuild.localize.knn_search import FEW_QUERIES, SparseL2Shortlist, in_chunks
 
 #: float32 elements per block of the distance matrix (memory bound of one block: 4 bytes each).
 _BLOCK_ELEMS = 1 << 21
@@ -121,8 +121,6 @@ class KnnLocalizer:
 
     def _candidates(self, a: np.ndarray, b: np.ndarray, c: int) -> np.ndarray:
         """(nq, c) RP indices holding each query's ``c`` nearest by the float32 distances."""
-        if self._shortlist is not None:
-            return self._shortlist.candidates(a, c)
         d2 = self._approx_d2(a, b)
         if c < d2.shape[1]:
             return np.argpartition(d2, c - 1, axis=1)[:, :c]
@@ -140,8 +138,8 @@ class KnnLocalizer:
         k = min(k or self.cfg.k, n_rp)
         c = min(n_rp, k + _MARGIN)
         nq = len(rss_dbm)
-        if self._shortlist is not None and nq <= FEW_QUERIES:
-            return self._kneighbors_few(rss_dbm, k, c)
+        if self._shortlist is not None:
+            return self._kneighbors_few(rss_dbm, k, c) if nq <= FEW_QUERIES else self._kneighbors_many(rss_dbm, k, c)
         dist = np.full((nq, k), np.inf)
         idx = np.full((nq, k), -1, dtype=np.int64)
         n_ap = max(self.ref.rss_dbm.shape[1], 1)
@@ -156,6 +154,27 @@ class KnnLocalizer:
             ci[~np.isfinite(e2)] = -1
             dist[s:s + block] = np.sqrt(e2)
             idx[s:s + block] = ci
+        return dist, idx
+
+    def _kneighbors_many(self, rss_dbm: np.ndarray, k: int, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`kneighbors` of many (fill, euclidean) queries: shortlist, exact re-rank and sort chunk by
+        chunk on the shortlist's worker threads."""
+        sl = self._shortlist
+        assert sl is not None
+        nq = len(rss_dbm)
+        dist = np.empty((nq, k))
+        idx = np.empty((nq, k), dtype=np.int64)
+        step = max(1, min(sl.chunk_queries(nq), _BLOCK_ELEMS // (c * max(sl.n_ap, 1))))
+
+        def run(s: int, e: int) -> None:
+            a, b = self._prep_query(rss_dbm[s:e])
+            cand = sl.select(a, c)
+            e2 = self._exact_d2(a, b, cand)
+            o = np.argsort(e2, axis=1, kind="stable")[:, :k]
+            dist[s:e] = np.sqrt(np.take_along_axis(e2, o, axis=1))
+            idx[s:e] = np.take_along_axis(cand, o, axis=1)
+
+        in_chunks(nq, step, run)
         return dist, idx
 
     def _kneighbors_few(self, rss_dbm: np.ndarray, k: int, c: int) -> tuple[np.ndarray, np.ndarray]:

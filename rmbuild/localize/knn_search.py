@@ -20,6 +20,7 @@ meant to be re-ranked exactly by the caller. Measured against scikit-learn in be
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -30,7 +31,7 @@ from rmbuild.localize.blas import one_blas_thread
 RP_BLOCK = 128
 #: RPs per group of the two-level selection (16: 1/16 of the entries reach the first argpartition).
 GROUP = 16
-#: queries up to this many at once go through the inverted index one by one instead of the blocks.
+#: queries up to this many at once go one by one (:meth:`SparseL2Shortlist.one`) instead of the blocks.
 FEW_QUERIES = 8
 #: worker threads over chunks of queries; BLAS runs one thread inside each (the products are small, and a
 #: multi-threaded BLAS on small products was 3-8x slower on the shared 2-core machine).
@@ -103,29 +104,14 @@ class SparseL2Shortlist:
         dt += self.sq[:, None]
         return dt
 
-    def candidates(self, aq: np.ndarray, c: int) -> np.ndarray:
-        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside; ``c <= n_rp``."""
-        nq = len(aq)
-        out = np.empty((nq, c), dtype=np.int64)
-        step = max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
-        starts = range(0, nq, step)
+    def chunk_queries(self, nq: int) -> int:
+        """Queries per chunk: the (RP, query) distances of a chunk within CHUNK_ELEMS, one chunk per thread."""
+        return max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
 
-        def run(s: int) -> None:
-            out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
-
-        if nq <= FEW_QUERIES:  # query by query: no BLAS threads, no blocks
-            for i in range(nq):
-                cols = np.flatnonzero(aq[i])
-                out[i] = self.one(cols, aq[i, cols], c)
-            return out
-        with one_blas_thread():
-            if len(starts) > 1 and THREADS > 1:
-                with ThreadPoolExecutor(THREADS) as ex:
-                    list(ex.map(run, starts))
-            else:
-                for s in starts:
-                    run(s)
-        return out
+    def select(self, aq: np.ndarray, c: int) -> np.ndarray:
+        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside, for one chunk
+        of queries on the calling thread; ``c <= n_rp``."""
+        return self._select(self._distances(aq), c)
 
     def _select(self, dt: np.ndarray, c: int) -> np.ndarray:
         """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq)."""
@@ -138,6 +124,19 @@ class SparseL2Shortlist:
             rows = (gs[:, :, None] * GROUP + np.arange(GROUP)).reshape(nq, -1)
         vals = dt[rows, np.arange(nq)[:, None]]
         return self.perm[np.take_along_axis(rows, smallest(vals, c), axis=1)]
+
+
+def in_chunks(n: int, step: int, run: Callable[[int, int], None]) -> None:
+    """``run(s, e)`` over the chunks [s, e) of ``range(n)`` of ``step`` items, on THREADS worker threads with one
+    BLAS thread each (numpy releases the GIL in the products, selections and gathers)."""
+    starts = range(0, n, step)
+    with one_blas_thread():
+        if len(starts) > 1 and THREADS > 1:
+            with ThreadPoolExecutor(THREADS) as ex:
+                list(ex.map(lambda s: run(s, min(s + step, n)), starts))
+        else:
+            for s in starts:
+                run(s, min(s + step, n))
 
 
 def smallest(x: np.ndarray, c: int) -> np.ndarray:
