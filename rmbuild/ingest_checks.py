@@ -103,37 +103,52 @@ def short_walks(ds: Dataset) -> list[str]:
 def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     """Each walk's median RSS difference (dB) to the other walks' co-located scans (walks with too few
     co-located pairs are left out)."""
-    wifi = ds.wifi[["walk_id", "t_s", "bssid", "rssi_dbm"]]
-    if wifi["walk_id"].nunique() < 3:
+    wifi = ds.wifi
+    wc_all, _ = pd.factorize(wifi["walk_id"])
+    if wc_all.max(initial=-1) < 2:
         return {}
-    scan = wifi.groupby(["walk_id", "t_s"], sort=False).ngroup().to_numpy()
+    scan = scan_ids(wc_all, wifi["t_s"].to_numpy(np.float64))
     keep = np.bincount(scan)[scan] >= MIN_SHARED_APS
-    wifi, scan = wifi[keep], scan[keep]
-    if not len(wifi):
+    if not keep.any():
         return {}
-    rssi = wifi["rssi_dbm"].to_numpy(np.float64)
-    ap = pd.factorize(wifi["bssid"])[0]
-    walk_codes, walk_names = pd.factorize(wifi["walk_id"])
-    # the strongest AP of every scan names its group; scan_walk[s]: the walk of scan s
-    order = np.lexsort((-rssi, scan))
-    first = order[np.r_[True, scan[order][1:] != scan[order][:-1]]]
+    scan = scan[keep]
+    rssi = wifi["rssi_dbm"].to_numpy(np.float64)[keep]
+    ap = pd.factorize(pd.factorize(wifi["bssid"])[0][keep])[0]  # codes in order of first appearance
+    walk_codes, walk_uniq = pd.factorize(wc_all[keep])
+    walk_names = pd.factorize(wifi["walk_id"])[1][walk_uniq]
+    # the strongest AP of every scan names its group (the first reading of the scan at its maximum);
+    # scan_walk[s]: the walk of scan s
+    by_scan = np.argsort(scan, kind="stable")  # the readings of scan s: by_scan[start[s]:start[s + 1]]
+    s_sorted, r_sorted = scan[by_scan], rssi[by_scan]
+    run = np.flatnonzero(np.r_[True, s_sorted[1:] != s_sorted[:-1]])
+    at_max = np.flatnonzero(r_sorted == np.repeat(np.maximum.reduceat(r_sorted, run), np.diff(np.r_[run, len(scan)])))
+    first = by_scan[at_max[np.r_[True, s_sorted[at_max][1:] != s_sorted[at_max][:-1]]]]
     scan_walk = np.full(int(scan.max()) + 1, -1)
     scan_walk[scan[first]] = walk_codes[first]
     top = pd.Series(scan[first]).groupby(ap[first]).agg(list)
     rng = np.random.default_rng(seed)
     diffs: list[list[float]] = [[] for _ in walk_names]
-    by_scan = np.argsort(scan, kind="stable")  # the readings of scan s: by_scan[start[s]:start[s + 1]]
-    start = np.searchsorted(scan[by_scan], np.arange(len(scan_walk) + 1))
+    start = np.searchsorted(s_sorted, np.arange(len(scan_walk) + 1))
     for members in sorted(top, key=len, reverse=True)[:MAX_GROUPS]:
         m = np.asarray(members)
         if len(np.unique(scan_walk[m])) < 2:
             continue
         if len(m) > MAX_GROUP_SCANS:
             m = rng.choice(m, MAX_GROUP_SCANS, replace=False)
-        rows = np.concatenate([by_scan[start[s]:start[s + 1]] for s in m])
-        member = np.repeat(np.arange(len(m)), start[m + 1] - start[m])
+        n = start[m + 1] - start[m]
+        member = np.repeat(np.arange(len(m)), n)
+        rows = by_scan[np.repeat(start[m] - np.cumsum(n) + n, n) + np.arange(n.sum())]
         _group_pairs(m, member, ap[rows], rssi[rows], scan_walk, diffs)
     return {str(walk_names[w]): float(np.median(d)) for w, d in enumerate(diffs) if len(d) >= MIN_PAIRS}
+
+
+def scan_ids(walk_codes: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Per reading, its scan's number: (walk, time) groups numbered in order of first appearance. Readings
+    ordered by walk and time (as ingest leaves them) are numbered by their runs, others by a groupby."""
+    dw, dt = np.diff(walk_codes), np.diff(t)
+    if (dw >= 0).all() and ((dw > 0) | (dt >= 0)).all():
+        return np.cumsum(np.r_[0, (dw != 0) | (dt != 0)])
+    return pd.DataFrame({"w": walk_codes, "t": t}).groupby(["w", "t"], sort=False).ngroup().to_numpy()
 
 
 def _row_nanmedian(a: np.ndarray) -> np.ndarray:
@@ -149,11 +164,11 @@ def _group_pairs(members: np.ndarray, row: np.ndarray, ap: np.ndarray, rssi: np.
                  diffs: list[list[float]]) -> None:
     """Median differences of the co-located scan pairs of one group (``row``: the member index of each of
     the members' readings ``ap``, ``rssi``), added to both walks' lists."""
-    col_ap, cols = np.unique(ap, return_inverse=True)
-    twice = np.bincount(cols)[cols] >= 2  # an AP only one scan heard is never shared: no column for it
-    col_ap, cols = np.unique(ap[twice], return_inverse=True)
-    mat = np.full((len(members), len(col_ap)), np.nan)
-    mat[row[twice], cols] = rssi[twice]
+    _, cols = np.unique(ap, return_inverse=True)
+    shared_col = np.bincount(cols) >= 2  # an AP only one scan heard is never shared: no column for it
+    twice = shared_col[cols]
+    mat = np.full((len(members), int(shared_col.sum())), np.nan)
+    mat[row[twice], (np.cumsum(shared_col) - 1)[cols[twice]]] = rssi[twice]
     walks = scan_walk[members]
     iu, ju = np.triu_indices(len(members), 1)
     seen = np.isfinite(mat).astype(np.float32)  # counts < 2^24: exact in float32

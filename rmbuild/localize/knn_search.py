@@ -6,7 +6,8 @@ cut into blocks of :data:`RP_BLOCK`; a block's RPs detect few APs between them (
 preset), so ``−2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only. ``‖a_r‖²`` is
 precomputed; ``‖a_q‖²`` is a per-query constant and does not change the ranking. A few queries at a time
 (one-at-a-time localization) go one by one: one float32 vector-matrix product over the rows (APs) of
-``−2 aᵀ`` the query detects, in the original RP order, and one ``argpartition``. (An inverted index — per AP,
+``−2 aᵀ`` the query detects, in the original RP order, and one ``partition`` (the caller re-ranks over
+the query's detected APs only, :meth:`KnnLocalizer._kneighbors_few`). (An inverted index — per AP,
 the RPs detecting it — with a weighted ``bincount`` over the query's postings was 2-3x slower: a query's APs
 are the common ones, ~90k postings of 1.6M entries, and the scattered sums cost more than the dense rows.)
 
@@ -19,6 +20,7 @@ meant to be re-ranked exactly by the caller. Measured against scikit-learn in be
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -29,7 +31,7 @@ from rmbuild.localize.blas import one_blas_thread
 RP_BLOCK = 128
 #: RPs per group of the two-level selection (16: 1/16 of the entries reach the first argpartition).
 GROUP = 16
-#: queries up to this many at once go through the inverted index one by one instead of the blocks.
+#: queries up to this many at once go one by one (:meth:`SparseL2Shortlist.one`) instead of the blocks.
 FEW_QUERIES = 8
 #: worker threads over chunks of queries; BLAS runs one thread inside each (the products are small, and a
 #: multi-threaded BLAS on small products was 3-8x slower on the shared 2-core machine).
@@ -78,14 +80,16 @@ class SparseL2Shortlist:
             cols = np.flatnonzero((ap[s:e] != 0).any(axis=0))
             self.blocks.append((s, e, cols, np.ascontiguousarray(-2.0 * ap[s:e][:, cols])))
 
-    def _one(self, aq: np.ndarray, c: int) -> np.ndarray:
-        """(c,) RP indices holding the ``c`` nearest of one query row ``aq`` (n_ap,), ties aside."""
+    def one(self, cols: np.ndarray, vals: np.ndarray, c: int) -> np.ndarray:
+        """(c,) RP indices holding the ``c`` nearest of one query, ties aside: the query detects the AP columns
+        ``cols`` with ``vals`` = rss − fill; one float32 vector-matrix product over those rows of ``−2 aᵀ``."""
         if c >= self.n_rp:
             return np.arange(self.n_rp)
-        cols = np.flatnonzero(aq)
-        d = aq[cols].astype(np.float32) @ self.wt[cols]
+        d = vals.astype(np.float32) @ self.wt[cols]
         d += self.sq_orig
-        return np.argpartition(d, c - 1)[:c]
+        kth = np.partition(d, c - 1)[c - 1]  # the c-th value: faster than argpartition (see smallest)
+        j = np.flatnonzero(d <= kth)
+        return j if len(j) == c else np.argpartition(d, c - 1)[:c]
 
     def _distances(self, aq: np.ndarray) -> np.ndarray:
         """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding)."""
@@ -100,28 +104,14 @@ class SparseL2Shortlist:
         dt += self.sq[:, None]
         return dt
 
-    def candidates(self, aq: np.ndarray, c: int) -> np.ndarray:
-        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside; ``c <= n_rp``."""
-        nq = len(aq)
-        out = np.empty((nq, c), dtype=np.int64)
-        step = max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
-        starts = range(0, nq, step)
+    def chunk_queries(self, nq: int) -> int:
+        """Queries per chunk: the (RP, query) distances of a chunk within CHUNK_ELEMS, one chunk per thread."""
+        return max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
 
-        def run(s: int) -> None:
-            out[s:s + step] = self._select(self._distances(aq[s:s + step]), c)
-
-        if nq <= FEW_QUERIES:  # the inverted index, query by query: no BLAS, no blocks
-            for i in range(nq):
-                out[i] = self._one(aq[i], c)
-            return out
-        with one_blas_thread():
-            if len(starts) > 1 and THREADS > 1:
-                with ThreadPoolExecutor(THREADS) as ex:
-                    list(ex.map(run, starts))
-            else:
-                for s in starts:
-                    run(s)
-        return out
+    def select(self, aq: np.ndarray, c: int) -> np.ndarray:
+        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside, for one chunk
+        of queries on the calling thread; ``c <= n_rp``."""
+        return self._select(self._distances(aq), c)
 
     def _select(self, dt: np.ndarray, c: int) -> np.ndarray:
         """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq)."""
@@ -134,6 +124,19 @@ class SparseL2Shortlist:
             rows = (gs[:, :, None] * GROUP + np.arange(GROUP)).reshape(nq, -1)
         vals = dt[rows, np.arange(nq)[:, None]]
         return self.perm[np.take_along_axis(rows, smallest(vals, c), axis=1)]
+
+
+def in_chunks(n: int, step: int, run: Callable[[int, int], None]) -> None:
+    """``run(s, e)`` over the chunks [s, e) of ``range(n)`` of ``step`` items, on THREADS worker threads with one
+    BLAS thread each (numpy releases the GIL in the products, selections and gathers)."""
+    starts = range(0, n, step)
+    with one_blas_thread():
+        if len(starts) > 1 and THREADS > 1:
+            with ThreadPoolExecutor(THREADS) as ex:
+                list(ex.map(lambda s: run(s, min(s + step, n)), starts))
+        else:
+            for s in starts:
+                run(s, min(s + step, n))
 
 
 def smallest(x: np.ndarray, c: int) -> np.ndarray:

@@ -84,6 +84,8 @@ def _table_of(p: Path) -> str | None:
 MAX_COLUMNS = 1000
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
 _ARROW_STR = pd.ArrowDtype(pa.string())
+#: bytes per chunk of the scan for fields starting with a space (bounded memory on any file size)
+_SCAN_CHUNK = 1 << 20
 NUMERIC_NA = ["", "nan", "NaN", "NAN", "-nan", "NA", "N/A", "n/a", "null", "NULL", "None", "<NA>"]
 
 
@@ -184,6 +186,25 @@ def _long_record(path: Path) -> tuple[str, str]:
     return "more fields than the header", str(path)
 
 
+def _has_initial_space(path: Path) -> bool:
+    """Whether a field of the file may start with a space or a tab (a comma or a line break followed by one),
+    which pandas' ``skipinitialspace`` then skips; without any, the option changes nothing and costs a third
+    of the parse (bench/bench_ingest.py), so it is left off. A compressed file is taken to have some."""
+    if str(path).lower().endswith(".gz"):
+        return True
+    prev = b"\n"  # the first field starts a line
+    with path.open("rb") as fh:
+        while chunk := fh.read(_SCAN_CHUNK):
+            buf, prev = prev + chunk, chunk[-1:]
+            if buf.find(b" ") < 0 and buf.find(b"\t") < 0:  # memchr: the usual case costs ~nothing
+                continue
+            a = np.frombuffer(buf, dtype=np.uint8)
+            ws = np.flatnonzero((a[1:] == 32) | (a[1:] == 9))  # a[ws]: the byte before each space or tab
+            if np.isin(a[ws], (44, 10, 13)).any():
+                return True
+    return False
+
+
 def read_located(path: Path, required: dict[str, str] | None = None,
                  optional: dict[str, str] | None = None) -> _Located:
     """Read one table file; string columns of the schema stay text ("00001", "NA"), numeric ones are numbers."""
@@ -203,8 +224,9 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
                                    index_col=False)
             strs = [c for c, k in schema.items() if k == "str"]
             # read as Arrow strings (as fast as no dtype; dtype=str was 2x slower), then the usual str dtype
-            df = pd.read_csv(path, skipinitialspace=True, dtype={c: _ARROW_STR for c in strs}, keep_default_na=False,
-                             na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"}, index_col=False)
+            df = pd.read_csv(path, skipinitialspace=_has_initial_space(path), dtype={c: _ARROW_STR for c in strs},
+                             keep_default_na=False, na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"},
+                             index_col=False)
             for c in strs:
                 if c in df.columns:
                     df[c] = df[c].astype(str)
