@@ -20,7 +20,10 @@ def peak_rss_mb() -> float:
 def machine() -> dict:
     import os
 
-    return {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()}
+    # the 1-minute load average when the result is written: timings from runs at different loads (other
+    # jobs on the machine) are not comparable, ratios within one run are
+    return {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
+            "load_1min": round(os.getloadavg()[0], 2)}
 
 
 @contextmanager
