@@ -6,7 +6,10 @@ hPa, i.e. tens of centimetres), then followed by a level with hysteresis: while 
 :data:`MIN_CHANGE_M` of the level, the level follows it slowly (weather drift: about 1 hPa in hours); once
 it leaves, a change has begun where the height last left the level's band, and ends when the height is
 still again (within :data:`STILL_RANGE_M` over :data:`STILL_S`), where the level settles anew. A change of at
-least :data:`MIN_CHANGE_M` is a floor change.
+least :data:`MIN_CHANGE_M` is a floor change. Its *midpoint*, where the smoothed height crosses halfway between
+the two levels (interpolated between seconds), is where a walk is cut: the band makes the start lag by up
+to :data:`BAND_M` of climb and the stillness test makes the end late, but the halfway crossing of a
+centred smoothing has no lag for a climb at a steady rate.
 """
 
 from __future__ import annotations
@@ -34,16 +37,18 @@ STILL_RANGE_M = 0.3
 
 @dataclass(frozen=True)
 class FloorChange:
-    """A floor change: start and end time (s) and the height change (m, up positive)."""
+    """A floor change: start, end and midpoint time (s) and the height change (m, up positive)."""
 
     t_start_s: float
     t_end_s: float
     dh_m: float
+    t_mid_s: float
 
 
 def smoothed_height(t_s: np.ndarray, p_hpa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(1-s grid times, relative height in m on that grid): per-second medians of the pressure, running
-    median over :data:`SMOOTH_S`, converted to height (0 at the start)."""
+    median over :data:`SMOOTH_S`, converted to height (0 at the start). A second's median stands at the
+    middle of that second."""
     t = np.asarray(t_s, dtype=float)
     p = np.asarray(p_hpa, dtype=float)
     ok = np.isfinite(t) & np.isfinite(p)
@@ -55,7 +60,7 @@ def smoothed_height(t_s: np.ndarray, p_hpa: np.ndarray) -> tuple[np.ndarray, np.
     per_s = np.array([np.median(p[sec == s]) for s in grid])
     half = int(SMOOTH_S // 2)
     sm = np.array([np.median(per_s[max(0, i - half):i + half + 1]) for i in range(len(per_s))])
-    return t[0] + grid.astype(float), -(sm - sm[0]) * M_PER_HPA
+    return t[0] + grid.astype(float) + 0.5, -(sm - sm[0]) * M_PER_HPA
 
 
 def floor_changes(t_s: np.ndarray, p_hpa: np.ndarray) -> list[FloorChange]:
@@ -77,7 +82,19 @@ def floor_changes(t_s: np.ndarray, p_hpa: np.ndarray) -> list[FloorChange]:
             j += 1
         new = float(np.median(h[j:j + STILL_S + 1]))
         if abs(new - level) >= MIN_CHANGE_M:
-            out.append(FloorChange(float(left), float(t[j]), float(new - level)))
+            mid = _crossing(t, h, int(np.searchsorted(t, left)), j, 0.5 * (level + new))
+            out.append(FloorChange(float(left), float(t[j]), float(new - level), mid))
         level, left = new, float(t[j])  # still again: the new level (a smaller step: drift, a ramp)
         i = j + 1
     return out
+
+
+def _crossing(t: np.ndarray, h: np.ndarray, i0: int, i1: int, level: float) -> float:
+    """The first time in ``t[i0..i1]`` where ``h`` crosses ``level`` (linear between samples)."""
+    above = h[i0:i1 + 1] >= level
+    k = int(np.argmax(above != above[0])) + i0 if (above != above[0]).any() else i1
+    if k == i0:
+        return float(t[k])
+    a, b = h[k - 1] - level, h[k] - level
+    w = a / (a - b) if a != b else 0.5
+    return float(t[k - 1] + w * (t[k] - t[k - 1]))

@@ -1,0 +1,105 @@
+"""Floors of an input that does not name them, from its barometers and its Wi-Fi (docs/floors.md).
+
+A walk whose barometer shows a floor change (:func:`rmbuild.pdr.baro.floor_changes`) is cut at each
+change's midpoint; its parts get levels relative to its start, counting storeys of :data:`STOREY_M`
+(at least one per change). Which floors the walks' relative levels are on follows from the Wi-Fi: the walks
+are placed one at a time, first the one visiting the most levels (its start is level 0), then each other walk
+at the level offset where its scans lie nearest (:func:`rmbuild.localize.floor.floor_distances`) to the scans
+of the walks already placed on the same levels. A scan whose level has no placed scans yet counts as its
+largest distance to a placed level, so a walk is not pushed onto empty levels to avoid a comparison.
+
+The floors are named by their level relative to the first walk's start, ``+0``, ``+1``, ``-1``: nothing in a
+barometer or a scan says which storey of the building that is. An input without barometer floor changes
+is left as it is (one floor, or the floors its ``floor`` columns give).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from rmbuild.io.formats.base import RawInput
+from rmbuild.localize.floor import floor_distances
+from rmbuild.pdr.baro import floor_changes
+
+#: m; the height of a storey counted per floor change (storeys are 3-4.5 m; a change of 6 m or more counts
+#: two: a lift passing a floor)
+STOREY_M = 4.0
+#: reference scans per level at most when placing a walk (a seeded subsample bounds the distance matrix)
+MAX_REFS = 1500
+
+#: a walk's parts: [(start time s, -inf for the first; relative level)]
+Parts = list[tuple[float, int]]
+
+
+def barometer_floors(raw: RawInput) -> dict[str, list[tuple[float, str]]] | None:
+    """walk id -> [(start time of the part in s, -inf for the first; floor name)] for every walk, when some
+    walk's barometer changes floor and the input has no floor columns; else None."""
+    if "floor" in raw.walks or "floor" in raw.poses:
+        return None
+    rel: dict[str, Parts] = {}
+    for wid in raw.walks["walk_id"].astype(str):
+        level, parts = 0, [(-np.inf, 0)]
+        t_p = raw.pressure.get(wid)
+        for ch in floor_changes(*t_p) if t_p is not None else []:
+            level += int(np.sign(ch.dh_m)) * max(1, int(round(abs(ch.dh_m) / STOREY_M)))
+            parts.append((ch.t_mid_s, level))
+        rel[wid] = parts
+    if all(len(p) == 1 for p in rel.values()):
+        return None
+    offsets = _place_walks(raw.wifi, rel)
+    return {w: [(t0, f"{lv + offsets[w]:+d}") for t0, lv in parts] for w, parts in rel.items()}
+
+
+def _scans(wifi: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(walk id per scan, time per scan, float32 RSS matrix scans x APs with NaN for not heard)."""
+    key = wifi["walk_id"].astype(str) + "\x00" + wifi["t_s"].astype(float).map(repr)
+    scan, uniq = pd.factorize(key)
+    ap, _ = pd.factorize(wifi["bssid"].astype(str))
+    rss = np.full((len(uniq), int(ap.max()) + 1 if len(ap) else 0), np.nan, dtype=np.float32)
+    rss[scan, ap] = wifi["rssi_dbm"].to_numpy(float)
+    first = np.unique(scan, return_index=True)[1]
+    return (wifi["walk_id"].astype(str).to_numpy()[first], wifi["t_s"].to_numpy(float)[first], rss)
+
+
+def _place_walks(wifi: pd.DataFrame, rel: dict[str, Parts]) -> dict[str, int]:
+    """walk -> level offset of its relative levels (module docstring)."""
+    wid, t, rss = _scans(wifi)
+    level = np.zeros(len(wid), dtype=np.int64)
+    for w, parts in rel.items():
+        m = wid == w
+        for t0, lv in parts:
+            level[m & (t >= t0)] = lv
+    order = sorted(rel, key=lambda w: (-len({lv for _, lv in rel[w]}), -int((wid == w).sum()), w))
+    offsets = {order[0]: 0}
+    placed = wid == order[0]
+    at = np.where(placed, level, 0)  # absolute level of the placed scans
+    rng = np.random.default_rng(0)
+    for w in order[1:]:
+        mine = np.flatnonzero(wid == w)
+        offsets[w] = _best_offset(rss, mine, level[mine], placed, at, rng) if len(mine) else 0
+        placed[mine] = True
+        at[mine] = level[mine] + offsets[w]
+    return offsets
+
+
+def _best_offset(rss: np.ndarray, mine: np.ndarray, mine_level: np.ndarray, placed: np.ndarray,
+                 at: np.ndarray, rng: np.random.Generator) -> int:
+    """The level offset putting a walk's scans (rows ``mine``, relative levels ``mine_level``) nearest the
+    placed scans of the same absolute levels (module docstring)."""
+    known = np.unique(at[placed])
+    refs = []
+    for k in known:
+        r = np.flatnonzero(placed & (at == k))
+        refs.append(rss[np.sort(rng.choice(r, MAX_REFS, replace=False)) if len(r) > MAX_REFS else r])
+    d = floor_distances(refs, rss[mine])
+    worst = d.max(axis=1)
+    best, best_o = np.inf, 0
+    for o in range(int(known[0] - mine_level.max()), int(known[-1] - mine_level.min()) + 1):
+        idx = np.searchsorted(known, mine_level + o)
+        ok = idx < len(known)
+        ok[ok] = known[idx[ok]] == (mine_level + o)[ok]
+        score = float(np.where(ok, d[np.arange(len(mine)), np.minimum(idx, len(known) - 1)], worst).mean())
+        if score < best - 1e-9 or (abs(score - best) <= 1e-9 and abs(o) < abs(best_o)):
+            best, best_o = score, o
+    return best_o
