@@ -30,7 +30,7 @@ from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "fixes", "imu")
-TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks")
+TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes")
 SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
 # column -> kind ("str" | "num"); required and optional columns per table
