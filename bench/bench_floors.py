@@ -267,6 +267,50 @@ def building_pipeline(scratch: Path, seeds: tuple[int, ...] = (11, 12), preset: 
     return out
 
 
+def frames_accuracy(scratch: Path, seeds: tuple[int, ...] = (11, 12), preset: str = "default") -> dict:
+    """The floors' frames stacked by the transitions (``building/optimize.json`` → ``floor_frames``) against
+    the truth: each floor's optimised poses mapped onto the reference floor's frame by the estimate and by
+    the true transform (each frame aligned to the building's true one), mean distance (m) and rotation
+    error (degrees)."""
+    import numpy as np
+    import pandas as pd
+
+    from rmbuild.geometry import align_se2
+    from rmbuild.io.workspace import building_floors
+    from rmbuild.stages.floor_frames import floor_frames
+
+    out = {}
+    for seed in seeds:
+        for how in ("ws", "ws-baro"):
+            ws = scratch / f"changes-{preset}-{seed}" / how
+            frames = floor_frames(ws)
+            if frames is None:
+                out[f"{seed} {how}"] = None
+                continue
+            to_true = {}
+            for name, f in (building_floors(ws) or {}).items():
+                est = pd.read_parquet(f / "optimize" / "poses.parquet")
+                est = est[est["linked"]] if "linked" in est else est
+                tru = pd.read_parquet(f / "data" / "truth" / "poses.parquet")
+                m = est.merge(tru, on=["walk_id", "t_s"], suffixes=("", "_true"))
+                xy = m[["x_m", "y_m"]].to_numpy(float)
+                to_true[name] = (align_se2(xy, m[["x_m_true", "y_m_true"]].to_numpy(float)), xy)
+            (r_ref, t_ref), _ = to_true[frames["reference"]]
+            res = {}
+            for name, fr in frames["floors"].items():
+                (r_f, t_f), xy = to_true[name]
+                true_xy = (xy @ r_f.T + t_f - t_ref) @ r_ref  # floor -> building -> reference frame
+                a = np.radians(fr["rotation_deg"])
+                r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+                est_xy = xy @ r.T + np.array([fr["dx_m"], fr["dy_m"]])
+                rot_true = np.degrees(np.arctan2((r_ref.T @ r_f)[1, 0], (r_ref.T @ r_f)[0, 0]))
+                res[name] = {"transitions": fr["transitions"], "rotation_known": fr["rotation_known"],
+                             "mean_error_m": round(float(np.hypot(*(est_xy - true_xy).T).mean()), 2),
+                             "rotation_error_deg": round(float((np.degrees(a) - rot_true + 180) % 360 - 180), 2)}
+            out[f"{seed} {how}"] = {"reference": frames["reference"], "floors": res}
+    return out
+
+
 def _drop_floor_columns(src: Path, dst: Path) -> None:
     import shutil
 
@@ -289,7 +333,9 @@ def _run(src: Path, ws: Path) -> dict:
     optimize.run(ws, OptimizeConfig(), force=True)
     export_map.run(ws, MapConfig(), force=True)
     rep, _ = evaluate.run(ws, EvaluateConfig(localizers=("knn",)), force=True)
-    floors = {p.name: p for p in sorted((ws / "floors").iterdir())} if (ws / "floors").is_dir() else {"all": ws}
+    from rmbuild.io.workspace import building_floors
+
+    floors = building_floors(ws) or {"all": ws}
     lm = {}
     for name, p in floors.items():
         r = json.loads((p / "optimize" / "report.json").read_text())
@@ -307,10 +353,12 @@ def _split_accuracy(src: Path, ws: Path) -> dict:
 
     poses = pd.read_csv(src / "poses.csv", usecols=["walk_id", "t_s", "floor"])
     changes = pd.read_csv(src / "truth" / "floor_changes.csv")
+    from rmbuild.io.workspace import building_floors
+
     rep = json.loads((ws / "building" / "ingest.json").read_text())
     got = []
-    for name in rep["floors"]:
-        p = pd.read_parquet(ws / "floors" / name / "data" / "poses.parquet", columns=["walk_id", "t_s"])
+    for name, path in (building_floors(ws) or {}).items():
+        p = pd.read_parquet(path / "data" / "poses.parquet", columns=["walk_id", "t_s"])
         got.append(p.assign(found=name, walk_id=p["walk_id"].str.split("@").str[0]))
     got = pd.concat(got).merge(poses, on=["walk_id", "t_s"], how="inner")
     mapping = got.groupby("found")["floor"].agg(lambda s: s.value_counts().index[0]).to_dict()
@@ -329,7 +377,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--sites", default="site1,site2")
     ap.add_argument("--scratch", type=Path, default=Path("/tmp/rmbuild-bench-floors"))
-    ap.add_argument("--reuse", action="store_true", help="Reuse the workspaces of an earlier run.")
+    ap.add_argument("--reuse", action="store_true", help="Reuse the workspaces of an earlier run (with --changes: "
+                    "only the floor frames are measured anew).")
     ap.add_argument("--synthetic", action="store_true",
                     help="Only the simulated buildings (floor attenuation sweep): floors_synthetic.json.")
     ap.add_argument("--changes", action="store_true",
@@ -340,12 +389,19 @@ def main() -> None:
     if args.synthetic:
         write_result("floors_synthetic", synthetic(args.scratch))
         return
+    if args.changes and args.reuse:
+        res = json.loads((RESULTS / "floors_changes.json").read_text())
+        res["floor_frames"] = frames_accuracy(args.scratch)
+        write_result("floors_changes", res)
+        _write_markdown()
+        return
     if args.changes:
         logs = ilc_data_root().parent.parent / "ipin2023" / "logs"
         res = {"synthetic": changes_synthetic(range(0, 10)),
                "ipin_storey": changes_ipin(logs) if logs.is_dir() else None,
                "ipin_mixed": ipin_mixed(logs, args.scratch) if logs.is_dir() else None,
                "pipeline": building_pipeline(args.scratch)}
+        res["floor_frames"] = frames_accuracy(args.scratch)
         write_result("floors_changes", res)
         _write_markdown()
         return
@@ -417,6 +473,15 @@ def changes_markdown(r: dict) -> str:
         sp = v["barometer_split"]
         lines.append(f"| {seed} | barometer split | steps on their true floor {sp['steps_on_true_floor']:.2%}; "
                      f"{sp['cuts']} cuts / {sp['true_changes']} changes, errors {sp['cut_errors_steps']} steps | | |")
+    if r.get("floor_frames"):
+        lines += ["", "Floors stacked by the transitions (building optimize report `floor_frames`) against the "
+                  "truth: mean distance of each floor's poses mapped onto the reference floor, rotation error:", "",
+                  "| seed, workspace | floor | transitions | rotation known | mean error (m) | rotation error (°) |",
+                  "|---|---|---|---|---|---|"]
+        for key, v in r["floor_frames"].items():
+            for name, f in (v or {}).get("floors", {}).items():
+                lines.append(f"| {key} | {name} | {f['transitions']} | {f['rotation_known']} | "
+                             f"{f['mean_error_m']:.2f} | {f['rotation_error_deg']:.1f} |")
     return "\n".join(lines) + "\n"
 
 

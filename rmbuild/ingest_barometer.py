@@ -4,11 +4,18 @@ A walk whose barometer shows a floor change (:func:`rmbuild.pdr.baro.floor_chang
 change's midpoint; its parts get levels relative to its start, counting storeys of :data:`STOREY_M`
 (at least one per change). Which floors the walks' relative levels are on follows from the Wi-Fi: the walks
 are placed one at a time, first the one visiting the most levels (its start is level 0), then each other walk
-at the level offset where its scans lie nearest (:func:`rmbuild.localize.floor.floor_distances`) to the scans
-of the walks already placed on the same levels. A scan whose level has no placed scans yet counts as its
-largest distance to a placed level, so a walk is not pushed onto empty levels to avoid a comparison.
+at the level offset where its scans lie nearest (:func:`rmbuild.localize.floor.floor_distances`, mean over the
+scans that land on a level with placed scans) to the scans of the walks already placed on the same levels;
+an offset must put at least :data:`MIN_OVERLAP_SCANS` of its scans on such levels. (Counting a scan on a
+level without placed scans as its largest distance instead pushed walks onto the known levels: on simulated
+three-floor buildings it put the walks between the second and third floor one floor down.) Walks that
+change floor are placed first; then each walk in turn is placed again against all the others, until none
+moves (at most :data:`MAX_ROUNDS` rounds): a walk placed early against few scans of a level may sit a floor
+off (on simulated three-floor buildings, the first pass put the walks of the top floor one floor down
+where the first walk had few scans on the floor they share), the others' scans then correct it. A walk wholly on a floor that no walk reaches from another is put on the
+known floor its scans are nearest: nothing tells it from that floor.
 
-The floors are named by their level relative to the first walk's start, ``+0``, ``+1``, ``-1``: nothing in a
+The floors are named by their level counted from the lowest floor found, ``+0``, ``+1``, ``+2``: nothing in a
 barometer or a scan says which storey of the building that is. An input without barometer floor changes
 is left as it is (one floor, or the floors its ``floor`` columns give).
 """
@@ -25,8 +32,12 @@ from rmbuild.pdr.baro import floor_changes
 #: m; the height of a storey counted per floor change (storeys are 3-4.5 m; a change of 6 m or more counts
 #: two: a lift passing a floor)
 STOREY_M = 4.0
+#: scans of a walk that an offset must put on levels with placed scans (fewer say little)
+MIN_OVERLAP_SCANS = 10
 #: reference scans per level at most when placing a walk (a seeded subsample bounds the distance matrix)
-MAX_REFS = 1500
+MAX_REFS = 1000
+#: rounds placing every walk again against all the others
+MAX_ROUNDS = 5
 
 #: a walk's parts: [(start time s, -inf for the first; relative level)]
 Parts = list[tuple[float, int]]
@@ -80,7 +91,22 @@ def _place_walks(wifi: pd.DataFrame, rel: dict[str, Parts]) -> dict[str, int]:
         offsets[w] = _best_offset(rss, mine, level[mine], placed, at, rng) if len(mine) else 0
         placed[mine] = True
         at[mine] = level[mine] + offsets[w]
-    return offsets
+    for _ in range(MAX_ROUNDS):  # each walk again against all the others
+        moved = False
+        for w in order:
+            mine = np.flatnonzero(wid == w)
+            others = placed.copy()
+            others[mine] = False
+            if len(mine) == 0 or not others.any():
+                continue
+            o = _best_offset(rss, mine, level[mine], others, at, rng)
+            if o != offsets[w]:
+                offsets[w], moved = o, True
+                at[mine] = level[mine] + o
+        if not moved:
+            break
+    low = min(lv + offsets[w] for w, parts in rel.items() for _, lv in parts)
+    return {w: o - low for w, o in offsets.items()}
 
 
 def _best_offset(rss: np.ndarray, mine: np.ndarray, mine_level: np.ndarray, placed: np.ndarray,
@@ -93,13 +119,17 @@ def _best_offset(rss: np.ndarray, mine: np.ndarray, mine_level: np.ndarray, plac
         r = np.flatnonzero(placed & (at == k))
         refs.append(rss[np.sort(rng.choice(r, MAX_REFS, replace=False)) if len(r) > MAX_REFS else r])
     d = floor_distances(refs, rss[mine])
-    worst = d.max(axis=1)
-    best, best_o = np.inf, 0
+    need = min(MIN_OVERLAP_SCANS, len(mine))
+    best, best_o, most, most_o = np.inf, 0, -1, 0
     for o in range(int(known[0] - mine_level.max()), int(known[-1] - mine_level.min()) + 1):
-        idx = np.searchsorted(known, mine_level + o)
-        ok = idx < len(known)
-        ok[ok] = known[idx[ok]] == (mine_level + o)[ok]
-        score = float(np.where(ok, d[np.arange(len(mine)), np.minimum(idx, len(known) - 1)], worst).mean())
+        idx = np.minimum(np.searchsorted(known, mine_level + o), len(known) - 1)
+        ok = known[idx] == mine_level + o
+        n = int(ok.sum())
+        if n > most or (n == most and abs(o) < abs(most_o)):
+            most, most_o = n, o
+        if n < need:
+            continue
+        score = float(d[np.flatnonzero(ok), idx[ok]].mean())
         if score < best - 1e-9 or (abs(score - best) <= 1e-9 and abs(o) < abs(best_o)):
             best, best_o = score, o
-    return best_o
+    return best_o if np.isfinite(best) else most_o

@@ -112,3 +112,56 @@ def test_a_floor_column_wins_over_the_barometer() -> None:
     raw.walks = raw.walks.assign(floor=["F1", "F2", "F1", "F2"])
     floors = split_floors(raw)
     assert floors is not None and set(floors) == {"F1", "F2"} and raw.transitions == []
+
+
+def test_a_raw_imu_walk_is_cut_by_time() -> None:
+    """A walk without poses (raw phone IMU) is cut at the change: each segment keeps its own samples."""
+    from rmbuild.io.formats.base import RawImu
+    from rmbuild.pdr import ImuSignals
+
+    raw, mids = _two_floor_input()
+    g = raw.poses["walk_id"] == "walk0"
+    raw.poses = raw.poses[~g].reset_index(drop=True)
+    t = np.arange(0.0, 120.0, 0.02)
+    sig = ImuSignals(t_acc_s=t, acc_mps2=np.zeros((len(t), 3)), t_yaw_s=t[::5], yaw_abs_rad=np.zeros(len(t[::5])),
+                     yaw_accuracy=np.zeros(len(t[::5]), dtype=np.int64), t_gyro_s=t, gyro_radps=np.zeros((len(t), 3)))
+    raw.imu = {"walk0": RawImu(sig, "imu.csv", {"acc": np.arange(len(t)) + 2})}
+    floors = split_floors(raw)
+    assert floors is not None
+    lo, hi = floors["+0"].imu["walk0@+0"], floors["+1"].imu["walk0@+1"]
+    cut = lo.signals.t_acc_s[-1]
+    assert abs(cut - mids["walk0"]) < 1.0 and hi.signals.t_acc_s[0] > cut
+    assert len(lo.signals.t_acc_s) + len(hi.signals.t_acc_s) == len(t)
+    assert hi.where("acc", 0) == f"imu.csv:{len(lo.signals.t_acc_s) + 2}"
+
+
+def test_a_mixed_ipin_call_ingests_into_per_floor_walks(shared_datasets, tmp_path) -> None:
+    """Three IPIN 2023 logfiles, one given a storey's climb at 40 % of its pressure: `ingest` without options
+    writes a building of two floors, that walk cut at the climb (the transition in the report)."""
+    from rmbuild.config import IngestConfig
+    from rmbuild.io.formats.ipin import parse_logfile
+    from rmbuild.stages import ingest
+
+    files = sorted((shared_datasets / "ipin2023" / "logs").glob("*.txt.gz"))[:3]
+    src = tmp_path / "in"
+    src.mkdir()
+    t0, ts = 0.0, [0.0]
+    for k, f in enumerate(files):
+        lines = gzip.open(f, "rt", errors="replace").read().splitlines(keepends=True)
+        if k == 0:
+            ts = [float(ln.split(";")[1]) for ln in lines if ln.startswith("PRES;")]
+            t0 = ts[0] + 0.4 * (ts[-1] - ts[0])
+            for i, ln in enumerate(lines):
+                if ln.startswith("PRES;"):
+                    r = ln.split(";")
+                    r[3] = f"{float(r[3]) - _climb(np.array([float(r[1])]), t0, 15.0, 3.5)[0]:.4f}"
+                    lines[i] = ";".join(r)
+        (src / f.name.removesuffix(".gz")).write_text("".join(lines))
+    rep = ingest.run([src], tmp_path / "ws", IngestConfig())
+    assert set(rep["floors"]) == {"+0", "+1"}
+    (tr,) = rep["transitions"]
+    pres = parse_logfile(src / files[0].name.removesuffix(".gz")).num["PRES"][:, 0]  # the reader's clock
+    mid = pres[0] + (t0 + 7.5 - ts[0])
+    assert tr["walk"] == files[0].name.removesuffix(".txt.gz") and 0.0 <= tr["t_s"] - mid < 2.0
+    assert (tr["from"]["floor"], tr["to"]["floor"]) == ("+0", "+1")
+    assert sum(r["walks"] for r in rep["floors"].values()) == 4

@@ -141,10 +141,10 @@ def increments(x: np.ndarray, y: np.ndarray, th: np.ndarray) -> np.ndarray:
     return np.column_stack([c * dx + s * dy, -s * dx + c * dy, np.diff(th)])
 
 
-def integrate(x0: float, y0: float, th0: float, inc: np.ndarray) -> np.ndarray:
-    """(n, 3) poses after each body-frame increment from (x0, y0, th0)."""
+def integrate(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
+    """(n, 3) poses after each body-frame increment from ``start`` (x, y, heading)."""
     out = np.zeros((len(inc), 3))
-    x, y, th = x0, y0, th0
+    x, y, th = (float(v) for v in start)
     for k, (f, lft, dth) in enumerate(inc):
         x += np.cos(th) * f - np.sin(th) * lft
         y += np.sin(th) * f + np.cos(th) * lft
@@ -185,10 +185,11 @@ def glue(head: dict[str, pd.DataFrame], i: int, tail: dict[str, pd.DataFrame], j
     inc = np.vstack([noisy(increments(*ends.T), rng),
                      increments(*tp[["x_m", "y_m", "heading_rad"]].to_numpy(float)[j:].T)])
     own0 = hp[["x_m", "y_m", "heading_rad"]].to_numpy(float)[i]
-    own = np.vstack([hp[["x_m", "y_m", "heading_rad"]].to_numpy(float)[:i + 1], integrate(*own0, inc)])
+    own = np.vstack([hp[["x_m", "y_m", "heading_rad"]].to_numpy(float)[:i + 1], integrate(own0, inc)])
     t_i = float(hp["t_s"].iloc[i])
     shift = t_i + float(dt[-1]) + 0.6 - float(tp["t_s"].iloc[j])
-    t = np.round(np.r_[hp["t_s"].to_numpy(float)[:i + 1], t_i + dt, tp["t_s"].to_numpy(float)[j:] + shift], 3)
+    t_all = np.r_[hp["t_s"].to_numpy(float)[:i + 1], t_i + dt, tp["t_s"].to_numpy(float)[j:] + shift]
+    t = np.asarray(np.round(t_all, 3), dtype=float)
     n_path, n_tail = len(xy), len(tp) - j
     mag = bool(np.isfinite(hp["yaw_abs_rad"].to_numpy(float)).any())
 
