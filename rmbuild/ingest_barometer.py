@@ -2,22 +2,23 @@
 
 A walk whose barometer shows a floor change (:func:`rmbuild.pdr.baro.floor_changes`) is cut at each
 change's midpoint; its parts get levels relative to its start, counting storeys of :data:`STOREY_M`
-(at least one per change). Which floors the walks' relative levels are on follows from the Wi-Fi: the walks
-are placed one at a time, first the one visiting the most levels (its start is level 0), then each other walk
-at the level offset where its scans lie nearest (:func:`rmbuild.localize.floor.floor_distances`, mean over the
-scans that land on a level with placed scans) to the scans of the walks already placed on the same levels;
-an offset must put at least :data:`MIN_OVERLAP_SCANS` of its scans on such levels. (Counting a scan on a
-level without placed scans as its largest distance instead pushed walks onto the known levels: on simulated
-three-floor buildings it put the walks between the second and third floor one floor down.) Walks that
-change floor are placed first; then each walk in turn is placed again against all the others, until none
-moves (at most :data:`MAX_ROUNDS` rounds): a walk placed early against few scans of a level may sit a floor
-off (on simulated three-floor buildings, the first pass put the walks of the top floor one floor down
-where the first walk had few scans on the floor they share), the others' scans then correct it. A walk wholly on a floor that no walk reaches from another is put on the
-known floor its scans are nearest: nothing tells it from that floor.
+(at least one per change). Which floors the walks' relative levels are on follows from the Wi-Fi. The walks
+are placed one at a time, those that change floor first: each at the level offset where its scans lie
+nearest (:func:`rmbuild.localize.floor.floor_distances`, mean over its scans that land on a level holding
+placed scans) to the placed scans of the same levels; an offset must put at least
+:data:`MIN_OVERLAP_SCANS` of its scans on such levels. Then each walk in turn is placed again against all
+the others, until none moves (at most :data:`MAX_ROUNDS` rounds): a walk placed early, against the few
+scans one walk has of a level, may sit a floor off, and the others' scans correct it.
 
-The floors are named by their level counted from the lowest floor found, ``+0``, ``+1``, ``+2``: nothing in a
-barometer or a scan says which storey of the building that is. An input without barometer floor changes
-is left as it is (one floor, or the floors its ``floor`` columns give).
+Tried and dropped (simulated three-floor buildings, docs/floors.md): counting a scan on a level without
+placed scans as its largest distance to a placed level (it pushed walks onto the known levels), and the
+first pass alone (it put the top floor's walks one floor down).
+
+A walk wholly on a floor that no walk reaches from another is put on the known floor its scans are
+nearest: nothing tells it from that floor. The floors are named by their level counted from the lowest
+floor found, ``+0``, ``+1``, ``+2``: nothing in a barometer or a scan says which storey of the building
+that is. An input without barometer floor changes is left as it is (one floor, or the floors its
+``floor`` columns give).
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ MIN_OVERLAP_SCANS = 10
 MAX_REFS = 1000
 #: rounds placing every walk again against all the others
 MAX_ROUNDS = 5
+#: in those rounds, the share of the most scans any offset puts on placed levels that an offset must put
+#: there (every level has scans by then: a walk does not drift onto levels of its own)
+ROUND_SHARE = 0.9
 
 #: a walk's parts: [(start time s, -inf for the first; relative level)]
 Parts = list[tuple[float, int]]
@@ -99,7 +103,7 @@ def _place_walks(wifi: pd.DataFrame, rel: dict[str, Parts]) -> dict[str, int]:
             others[mine] = False
             if len(mine) == 0 or not others.any():
                 continue
-            o = _best_offset(rss, mine, level[mine], others, at, rng)
+            o = _best_offset(rss, mine, level[mine], others, at, rng, ROUND_SHARE)
             if o != offsets[w]:
                 offsets[w], moved = o, True
                 at[mine] = level[mine] + o
@@ -110,26 +114,21 @@ def _place_walks(wifi: pd.DataFrame, rel: dict[str, Parts]) -> dict[str, int]:
 
 
 def _best_offset(rss: np.ndarray, mine: np.ndarray, mine_level: np.ndarray, placed: np.ndarray,
-                 at: np.ndarray, rng: np.random.Generator) -> int:
+                 at: np.ndarray, rng: np.random.Generator, share: float = 0.0) -> int:
     """The level offset putting a walk's scans (rows ``mine``, relative levels ``mine_level``) nearest the
-    placed scans of the same absolute levels (module docstring)."""
+    placed scans of the same absolute levels; an offset must put :data:`MIN_OVERLAP_SCANS` and ``share`` of
+    the most any offset puts on placed levels there (module docstring)."""
     known = np.unique(at[placed])
     refs = []
     for k in known:
         r = np.flatnonzero(placed & (at == k))
         refs.append(rss[np.sort(rng.choice(r, MAX_REFS, replace=False)) if len(r) > MAX_REFS else r])
     d = floor_distances(refs, rss[mine])
-    need = min(MIN_OVERLAP_SCANS, len(mine))
-    best, best_o, most, most_o = np.inf, 0, -1, 0
+    cands = []
     for o in range(int(known[0] - mine_level.max()), int(known[-1] - mine_level.min()) + 1):
         idx = np.minimum(np.searchsorted(known, mine_level + o), len(known) - 1)
         ok = known[idx] == mine_level + o
-        n = int(ok.sum())
-        if n > most or (n == most and abs(o) < abs(most_o)):
-            most, most_o = n, o
-        if n < need:
-            continue
-        score = float(d[np.flatnonzero(ok), idx[ok]].mean())
-        if score < best - 1e-9 or (abs(score - best) <= 1e-9 and abs(o) < abs(best_o)):
-            best, best_o = score, o
-    return best_o if np.isfinite(best) else most_o
+        cands.append((o, int(ok.sum()), float(d[np.flatnonzero(ok), idx[ok]].mean()) if ok.any() else np.inf))
+    most = max(n for _, n, _ in cands)
+    need = max(min(MIN_OVERLAP_SCANS, len(mine)), share * most)
+    return min((c for c in cands if c[1] >= need), key=lambda c: (c[2], abs(c[0])))[0]

@@ -5,7 +5,8 @@ on one floor) or on ``poses`` (a walk that changes floor: stairs, lift). A walk 
 cut at each change into per-floor segments ``<walk>@<floor>`` (``#2``, ``#3`` for a second visit of the
 same floor); its Wi-Fi readings and fixes go to the segment whose time span holds them. An input without
 floor columns is split where its barometers show floor changes (:mod:`rmbuild.ingest_barometer`), the
-floors named by level counted from the lowest one found. Inputs without either, or with a single floor, stay one floor.
+floors named by level counted from the lowest one found. Inputs without either, or with a single floor,
+stay one floor.
 Every cut of a walk is a *transition* (``RawInput.transitions``): the place where its two segments meet,
 on both floors.
 """
