@@ -296,9 +296,11 @@ def building_pipeline(scratch: Path, seeds: tuple[int, ...] = (11, 12), preset: 
         d = scratch / f"changes-{preset}-{seed}"
         simulate.run(d / "in", _building_cfg(base), force=True)
         simulate.run(d / "in1", replace(base, building=replace(base.building, floors=1)), force=True)
+        simulate.run(d / "in0", replace(_building_cfg(base), building=replace(_building_cfg(base).building,
+                                                                              floor_change_walks=0)), force=True)
         _drop_floor_columns(d / "in", d / "in-baro")
         out[str(seed)] = {"floor_columns": _run(d / "in", d / "ws"), "barometer": _run(d / "in-baro", d / "ws-baro"),
-                          "single_floor": _run(d / "in1", d / "ws1"),
+                          "single_floor": _run(d / "in1", d / "ws1"), "no_floor_changes": _run(d / "in0", d / "ws0"),
                           "barometer_split": _split_accuracy(d / "in", d / "ws-baro")}
         print(seed, json.dumps(out[str(seed)]), flush=True)
     return out
@@ -487,6 +489,14 @@ def changes_markdown(r: dict) -> str:
         lines.append(f"| {kind} | {k['n']} | {k['within_2_steps']} | {k['max_abs_steps']} |")
     lines += ["", f"Missed changes: {sy['missed']}; changes found on walks that stay on one floor: "
               f"{sy['false_changes']}.", ""]
+    if r.get("split"):
+        lines += ["The same buildings without their floor columns, split by the barometer and named by the Wi-Fi "
+                  "(`split_floors`):", "", "| seed | floors found | steps on their true floor | cuts / true changes | "
+                  "cut errors (steps) |", "|---|---|---|---|---|"]
+        for seed, v in r["split"].items():
+            lines.append(f"| {seed} | {v['floors_found']} | {v['steps_on_true_floor']:.2%} | {v['cuts']} / "
+                         f"{v['true_changes']} | {v['cut_errors_steps']} |")
+        lines.append("")
     ip = r.get("ipin_storey")
     if ip:
         lines += [f"IPIN 2023 walks with a storey added to the real pressure: {ip['found']} of {ip['cases']} found; "
@@ -503,7 +513,9 @@ def changes_markdown(r: dict) -> str:
               "|---|---|---|---|---|"]
     for seed, v in r["pipeline"].items():
         single = v["single_floor"]["landmark_m"]["all"]["optimized"]
-        for how in ("floor_columns", "barometer"):
+        for how in ("floor_columns", "barometer", "no_floor_changes"):
+            if how not in v:
+                continue
             fc = v[how]["floor_hit_rate"]
             lm = ", ".join(f"{n} {x['optimized']:.2f}" for n, x in v[how]["landmark_m"].items())
             rate = f"{fc['hit_rate']:.1%} ({fc['hit_rate_single_scan']:.1%})"
