@@ -3,8 +3,12 @@
 A reader says which floor its data is on with an optional ``floor`` column: on ``walks`` (the whole walk
 on one floor) or on ``poses`` (a walk that changes floor: stairs, lift). A walk whose poses change floor is
 cut at each change into per-floor segments ``<walk>@<floor>`` (``#2``, ``#3`` for a second visit of the
-same floor); its Wi-Fi readings and fixes go to the segment whose time span holds them. Inputs without a
-floor column, or with a single floor, stay one floor (no split).
+same floor); its Wi-Fi readings and fixes go to the segment whose time span holds them. An input without
+floor columns is split where its barometers show floor changes (:mod:`rmbuild.ingest_barometer`), the
+floors named by level counted from the lowest one found. Inputs without either, or with a single floor,
+stay one floor.
+Every cut of a walk is a *transition* (``RawInput.transitions``): the place where its two segments meet,
+on both floors.
 """
 
 from __future__ import annotations
@@ -17,7 +21,9 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.errors import InputError
-from rmbuild.io.formats.base import RawInput
+from rmbuild.ingest_barometer import barometer_floors
+from rmbuild.io.formats.base import RawImu, RawInput
+from rmbuild.pdr import ImuSignals
 
 FLOOR_COLUMN = "floor"
 #: floor names with a level: B2 / -2 (basements), F1 / 1F / L1 (ground floor = level 0 in the "F1" naming
@@ -25,7 +31,7 @@ FLOOR_COLUMN = "floor"
 _LEVEL_PATTERNS = (
     (re.compile(r"^(?:B|LG|UG|P)(\d+)$", re.I), lambda n: -n),
     (re.compile(r"^(?:F|L)(\d+)$|^(\d+)F$", re.I), lambda n: n - 1),
-    (re.compile(r"^(-?\d+)$"), lambda n: n),
+    (re.compile(r"^([+-]?\d+)$"), lambda n: n),
 )
 
 
@@ -45,6 +51,9 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     """One RawInput per floor (in order of first appearance), or None for a single floor. The floor
     columns are consumed: the returned inputs (and ``raw`` when None is returned) have none. What the reader
     says of the whole input (``skipped``, ``notes``) stays with ``raw``, not with the floors."""
+    cuts = barometer_floors(raw)
+    if cuts is not None:
+        _apply_cuts(raw, cuts)
     walk_floor = _walk_floors(raw)
     pose_floor = raw.poses[FLOOR_COLUMN].fillna("").astype(str).str.strip() if FLOOR_COLUMN in raw.poses else None
     raw.walks = raw.walks.drop(columns=[FLOOR_COLUMN], errors="ignore")
@@ -54,27 +63,39 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     pf = pose_floor if pose_floor is not None else pd.Series("", index=raw.poses.index)
     if walk_floor is not None:  # a pose without a floor takes its walk's
         pf = pf.where(pf != "", raw.poses["walk_id"].astype(str).map(walk_floor).fillna(""))
-    segments = _segments(raw, pf, walk_floor or {})
+    segments = _segments(raw, pf, walk_floor or {}, cuts or {})
     floors = list(dict.fromkeys(f for _, f, _ in segments))
     if len(floors) <= 1:
         return None
+    raw.transitions = _transitions(segments)
     return {f: _floor_input(raw, f, [(w, s) for w, ff, s in segments if ff == f]) for f in floors}
 
 
-def barometer_warnings(raw: RawInput) -> list[str]:
-    """Walks whose barometer says they changed floor, when the input gives no floors (they are mapped as
-    one floor: a warning each). Call before :func:`split_floors`, which consumes the floor columns."""
-    if FLOOR_COLUMN in raw.walks or FLOOR_COLUMN in raw.poses:
-        return []
-    from rmbuild.pdr.baro import floor_changes
+def _apply_cuts(raw: RawInput, cuts: dict[str, list[tuple[float, str]]]) -> None:
+    """Give ``raw`` the floor columns the barometer cuts say (poses by time; a walk its first part's), and a
+    note per walk cut."""
+    raw.walks = raw.walks.assign(floor=raw.walks["walk_id"].astype(str).map(lambda w: cuts[w][0][1]))
+    wids = raw.poses["walk_id"].astype(str).to_numpy()
+    t = raw.poses["t_s"].to_numpy(float)
+    floor = np.empty(len(wids), dtype=object)
+    for w, parts in cuts.items():
+        m = wids == w
+        starts = np.array([t0 for t0, _ in parts])
+        floor[m] = np.array([f for _, f in parts], dtype=object)[np.searchsorted(starts, t[m], side="right") - 1]
+        if len(parts) > 1:
+            raw.notes.append(f"walk {w!r}: cut at the barometer's floor changes into floors "
+                             + " → ".join(f for _, f in parts)
+                             + f" (at {', '.join(f'{t0:.1f}' for t0, _ in parts[1:])} s)")
+    raw.poses = raw.poses.assign(floor=floor)
 
+
+def _transitions(segments: list[Segment]) -> list[dict]:
+    """The cuts between consecutive segments of a walk: walk, time (s), segment and floor on either side."""
     out = []
-    for wid, (t, p) in raw.pressure.items():
-        ch = floor_changes(t, p)
-        if ch:
-            what = ", ".join(f"{c.dh_m:+.1f} m at {c.t_start_s:.0f}-{c.t_end_s:.0f} s" for c in ch[:3])
-            out.append(f"walk {wid!r}: the barometer says it changed floor ({what}); without a floor column "
-                       "its parts are mapped as one floor")
+    for (w0, f0, (s0, _, _)), (w1, f1, (s1, t1, _)) in zip(segments, segments[1:], strict=False):
+        if w0 == w1:
+            out.append({"walk": w0, "t_s": round(float(t1), 3), "from": {"floor": f0, "walk": s0},
+                        "to": {"floor": f1, "walk": s1}})
     return out
 
 
@@ -89,8 +110,10 @@ def _walk_floors(raw: RawInput) -> dict[str, str] | None:
 Segment = tuple[str, str, tuple[str, float, float]]
 
 
-def _segments(raw: RawInput, pose_floor: pd.Series, walk_floor: dict[str, str]) -> list[Segment]:
-    """Every walk's per-floor segments; a walk or pose without a floor is an error (the others have one)."""
+def _segments(raw: RawInput, pose_floor: pd.Series, walk_floor: dict[str, str],
+              cuts: dict[str, list[tuple[float, str]]]) -> list[Segment]:
+    """Every walk's per-floor segments; a walk or pose without a floor is an error (the others have one). A
+    walk without poses (raw IMU) is cut by time where ``cuts`` (barometer) say."""
     out: list[Segment] = []
     wids = raw.poses["walk_id"].astype(str).to_numpy()
     pf = pose_floor.to_numpy(dtype=object)
@@ -98,6 +121,9 @@ def _segments(raw: RawInput, pose_floor: pd.Series, walk_floor: dict[str, str]) 
     where = raw.where.get("poses", lambda i: f"poses row {i + 1}")
     for wid in raw.walks["walk_id"].astype(str):
         rows = np.flatnonzero(wids == wid)
+        if len(rows) == 0 and len(cuts.get(wid, [])) > 1:
+            out.extend(_named(wid, [(f, t0) for t0, f in cuts[wid]]))
+            continue
         if len(rows) == 0:  # a walk without poses (raw IMU): the walk's floor
             f = walk_floor.get(wid, "")
             if not f:
@@ -114,14 +140,21 @@ def _segments(raw: RawInput, pose_floor: pd.Series, walk_floor: dict[str, str]) 
         if len(starts) == 1:
             out.append((wid, str(fl[0]), (wid, -np.inf, np.inf)))
             continue
-        seen: dict[str, int] = {}
-        for k, s in enumerate(starts):
-            f = str(fl[s])
-            seen[f] = seen.get(f, 0) + 1
-            sid = f"{wid}@{f}" + (f"#{seen[f]}" if seen[f] > 1 else "")
-            t0 = -np.inf if k == 0 else float(t[rows[s]])
-            t1 = np.inf if k == len(starts) - 1 else float(t[rows[starts[k + 1]]])
-            out.append((wid, f, (sid, t0, t1)))
+        out.extend(_named(wid, [(str(fl[s]), float(t[rows[s]])) for s in starts]))
+    return out
+
+
+def _named(wid: str, parts: list[tuple[str, float]]) -> list[Segment]:
+    """A walk's segments from its parts (floor, start time s): ids ``<walk>@<floor>`` (``#2`` for a second
+    visit), the first open at the start and the last at the end."""
+    out: list[Segment] = []
+    seen: dict[str, int] = {}
+    for k, (f, _) in enumerate(parts):
+        seen[f] = seen.get(f, 0) + 1
+        sid = f"{wid}@{f}" + (f"#{seen[f]}" if seen[f] > 1 else "")
+        t0 = -np.inf if k == 0 else parts[k][1]
+        t1 = np.inf if k == len(parts) - 1 else parts[k + 1][1]
+        out.append((wid, f, (sid, t0, t1)))
     return out
 
 
@@ -140,12 +173,12 @@ def _floor_input(raw: RawInput, floor: str, segs: list[tuple[str, tuple[str, flo
         if name in raw.where:
             where[name] = _shifted(raw.where[name], rows)
     own = {w for w, _ in segs}
-    seg_ids = {w: s[0] for w, s in segs if s[0] == w}  # walks kept whole keep their raw IMU
+    imu = {s[0]: _imu_part(raw.imu[w], s[1], s[2]) for w, s in segs if w in raw.imu}
     extra = {k: _truth_part(v, floor, own) for k, v in raw.truth_extra.items()}
     aps = _truth_part(raw.truth_aps, floor, own) if raw.truth_aps is not None else None
     return replace(raw, walks=tables["walks"], poses=tables["poses"], wifi=tables["wifi"], fixes=tables["fixes"],
                    truth_poses=tables.get("truth_poses"), truth_extra=extra, truth_aps=aps, where=where,
-                   imu={w: v for w, v in raw.imu.items() if w in seg_ids}, skipped={}, notes=[],
+                   imu=imu, skipped={}, notes=[], transitions=[],
                    floorplan=raw.floorplans.get(floor) if raw.floorplans else raw.floorplan, floorplans={})
 
 
@@ -182,3 +215,22 @@ def _rows_of(df: pd.DataFrame, segs: list[tuple[str, tuple[str, float, float]]],
 
 def _shifted(where: Callable[[int], str], rows: np.ndarray) -> Callable[[int], str]:
     return lambda i: where(int(rows[i]))
+
+
+def _imu_part(imu: RawImu, t0: float, t1: float) -> RawImu:
+    """The raw IMU samples of a walk in [t0, t1) s (a segment of a walk cut by its barometer)."""
+    if not (np.isfinite(t0) or np.isfinite(t1)):
+        return imu
+    sg = imu.signals
+
+    def keep(t: np.ndarray) -> np.ndarray:
+        return (t >= t0) & (t < t1)
+
+    a, y, g = keep(sg.t_acc_s), keep(sg.t_yaw_s), keep(sg.t_gyro_s)
+    quat = sg.quat_xyzw[y] if len(sg.quat_xyzw) == len(y) else sg.quat_xyzw
+    signals = ImuSignals(t_acc_s=sg.t_acc_s[a], acc_mps2=sg.acc_mps2[a], t_yaw_s=sg.t_yaw_s[y],
+                         yaw_abs_rad=sg.yaw_abs_rad[y], yaw_accuracy=sg.yaw_accuracy[y], t_gyro_s=sg.t_gyro_s[g],
+                         gyro_radps=sg.gyro_radps[g], quat_xyzw=quat)
+    masks = {"acc": a, "yaw": y, "gyro": g}
+    lines = {k: v[masks[k]] if k in masks and len(v) == len(masks[k]) else v for k, v in imu.lines.items()}
+    return RawImu(signals, imu.source, lines, imu.unit)

@@ -80,10 +80,10 @@ def test_a_walk_without_floor_among_floors_is_an_error(tmp_path: Path) -> None:
 
 # ---------------------------------------------------------------- a synthetic building of two floors
 def _two_floor_input(base: Path) -> dict[str, Path]:
-    """A simulated building of two tiny floors (each floor's APs heard on the other through the floor), and
-    each floor's part of its files alone."""
+    """A simulated building of two tiny floors (each floor's APs heard on the other through the floor; no walk
+    changes floor, so each floor's part of the files is its walks'), and each floor's part of its files alone."""
     cfg = preset_config("tiny", 5)
-    cfg = replace(cfg, building=replace(cfg.building, floors=2))
+    cfg = replace(cfg, building=replace(cfg.building, floors=2, floor_change_walks=0))
     simulate.run(base / "both", cfg)
     out = {"both": base / "both"}
     tables = {str(f.relative_to(base / "both")): pd.read_csv(f, dtype={"walk_id": str, "floor": str})
@@ -235,8 +235,9 @@ def test_simulated_building_hears_other_floors_through_the_floor() -> None:
     d = simulate_building(replace(cfg, building=replace(cfg.building, floors=2, floor_attenuation_db=15.0)))
     assert set(d.walks["floor"]) == {"F1", "F2"} and d.walks["walk_id"].is_unique
     ap_floor = d.truth_aps.set_index("bssid")["floor"]
-    walk_floor = d.walks.set_index("walk_id")["floor"]
-    w = d.wifi.assign(ap=d.wifi["bssid"].map(ap_floor), at=d.wifi["walk_id"].map(walk_floor))
+    w = pd.merge_asof(d.wifi.sort_values("t_s"), d.poses[["walk_id", "t_s", "floor"]].sort_values("t_s"), on="t_s",
+                      by="walk_id", direction="nearest")  # the floor of the step nearest each reading
+    w = w.assign(ap=w["bssid"].map(ap_floor), at=w["floor"])
     own, other = w[w["ap"] == w["at"]], w[w["ap"] != w["at"]]
     assert len(other) > 0.05 * len(own)  # the floor damps, it does not silence
     assert other["rssi_dbm"].median() < own["rssi_dbm"].median() - 5.0

@@ -307,6 +307,15 @@ class BuildingConfig:
     # dB; extra path loss per floor between an AP and a scan on another floor (the floor attenuation
     # factor: about 13-16 dB through one floor in Seidel & Rappaport 1992).
     floor_attenuation_db: float = bounded(15.0, 0.0, 60.0)
+    # walks per pair of adjacent floors that change floor: map walks passing the stairs or the lift swap
+    # their parts after it (one goes up, the other down), half of the pairs by the stairs, half by the lift.
+    floor_change_walks: int = bounded(4, 0, 100)
+    # m; height of a storey (~0.42 hPa of air pressure)
+    storey_m: float = bounded(3.5, 2.5, 8.0)
+    # hPa; 1-sigma white noise of a phone barometer's reading (0.01-0.06 hPa in phone datasheets)
+    baro_noise_hpa: float = bounded(0.03, 0.0, 1.0)
+    # hPa/h; 1-sigma of a walk's weather trend (a front moves pressure by 1-3 hPa in hours)
+    baro_drift_hpa_per_h: float = bounded(1.0, 0.0, 20.0)
 
     def validate(self) -> None:
         check_ranges(self)
@@ -330,7 +339,7 @@ class SimulateConfig:
     devices: DevicesConfig = field(default_factory=DevicesConfig)
     # raw phone IMU (only with `simulate --raw-imu`)
     phone: PhoneImuConfig = field(default_factory=PhoneImuConfig)
-    # several floors (docs/floors.md)
+    # several floors, stairs, a lift and barometers (docs/floors.md)
     building: BuildingConfig = field(default_factory=BuildingConfig)
 
     def validate(self) -> None:

@@ -12,7 +12,7 @@ from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
-from rmbuild.ingest_floors import barometer_warnings, floor_level, split_floors
+from rmbuild.ingest_floors import floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floorplan import MIN_FIXES_INSIDE, fixes_inside_share, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
@@ -84,7 +84,6 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     raw = reader.read(files, cfg)
     progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
-    baro = barometer_warnings(raw)
     floors = split_floors(raw)
     if floors is not None:
         return _run_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, plan, raw,
@@ -96,7 +95,6 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     t1 = time.perf_counter()
     ds, fp, summary, plan = _build(raw, cfg, reader.name, pdr_cfg, plan, on_walk=lambda w: progress.advance())
     progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
-    summary["warnings"].extend(baro)
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
     progress.phase("writing workspace")
@@ -158,7 +156,7 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
     report["building"].update({"aps": len(bssids), "time_s": {"read": round(t_read, 3),
                                                                "total": round(time.perf_counter() - t0, 3)}})
     report.update({"format": fmt, "inputs": [str(p) for p in inputs], "skipped": dict(whole.skipped),
-                   "notes": list(whole.notes)})
+                   "notes": list(whole.notes), "transitions": list(whole.transitions)})
     write_json_atomic(building_report_path(workspace, "ingest"), report)
     for name, (*_, summary, _p, _u) in built.items():
         for msg in summary["warnings"]:

@@ -28,6 +28,7 @@ TABLE_FILES = {
     "truth_devices": "truth/devices",
     "truth_users": "truth/users",
     "truth_landmarks": "truth/landmarks",
+    "truth_floor_changes": "truth/floor_changes",
 }
 
 

@@ -46,6 +46,9 @@ class SimulatedData:
     truth_landmarks: pd.DataFrame
     venue: dict
     radio: RadioModel
+    #: a building's floor changes (walk_id, kind, from / to floor, step index and time of the first step on
+    #: the new floor), :mod:`rmbuild.synthetic.floor_change`; None for one floor
+    truth_floor_changes: pd.DataFrame | None = None
 
 
 def radio_field(

@@ -17,6 +17,8 @@ Contract for ``Reader.read``:
 - ``walks``: walk_id, device_id, user_id, role, source.
 - ``floor`` (optional str column on ``walks`` or ``poses``): the floor the data is on; an input with
   several floors is split into one workspace per floor (:mod:`rmbuild.ingest_floors`).
+- ``pressure``: walk_id -> the barometer's (times s, hPa), when the format has one: without floor columns,
+  its floor changes split the walk (:mod:`rmbuild.ingest_barometer`).
 - A problem in a file raises :class:`rmbuild.errors.InputError` naming file and line/row. Lines of a
   known-but-unused kind are counted in ``skipped`` (kind -> count), not errors.
 - ``where`` maps each table to a callable giving "file:row" for a row position, so shared validation can
@@ -88,6 +90,8 @@ class RawInput:
     floorplans: dict[str, dict] = field(default_factory=dict)
     #: walk_id -> (times s, pressure hPa) of its barometer, when the format has one (floor changes)
     pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: where a walk was cut between floors (:mod:`rmbuild.ingest_floors`): walk, t_s, the segments either side
+    transitions: list[dict] = field(default_factory=list)
 
 
 class Reader(ABC):

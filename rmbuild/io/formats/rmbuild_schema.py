@@ -30,13 +30,14 @@ from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "fixes", "imu")
-TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks")
+TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes")
 SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
 # column -> kind ("str" | "num"); required and optional columns per table
 POSE_ABS = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num", "heading_rad": "num"}
 POSE_INC = {"walk_id": "str", "t_s": "num", "step_length_m": "num", "dheading_rad": "num"}
-POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "num", "floor": "str"}
+POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "num", "floor": "str",
+            "pressure_hpa": "num"}
 SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
     "walks": ({"walk_id": "str"}, {"device_id": "str", "user_id": "str", "role": "str", "floor": "str"}),
     "wifi": (
@@ -49,10 +50,14 @@ SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
 #: raw phone IMU (one row per sample), turned into per-step poses by the PDR (rmbuild/pdr, [pdr] config)
 IMU_REQ = {"walk_id": "str", "t_s": "num", "acc_x_mps2": "num", "acc_y_mps2": "num", "acc_z_mps2": "num"}
 IMU_OPT = {"gyro_x_radps": "num", "gyro_y_radps": "num", "gyro_z_radps": "num", "yaw_abs_rad": "num",
-           "yaw_accuracy": "num"}
+           "yaw_accuracy": "num", "pressure_hpa": "num"}
+#: the barometer's column (hPa) on poses and imu: read into RawInput.pressure (floor changes), not a pose field
+PRESSURE = "pressure_hpa"
+#: hPa; plausible air pressures (Dead Sea shore ~1,065; 9 km up ~300): outside, the unit is wrong (Pa, kPa)
+PRESSURE_RANGE_HPA = (300.0, 1100.0)
 #: optional numeric columns where an empty cell / NaN is allowed (means "not available")
 NULLABLE = {"yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz", "freq_mhz", "gyro_x_radps", "gyro_y_radps",
-            "gyro_z_radps", "yaw_accuracy"}
+            "gyro_z_radps", "yaw_accuracy", "pressure_hpa"}
 ROLES = ("", "map", "test")
 
 
@@ -379,7 +384,25 @@ def _column(df: pd.DataFrame, name: str, rows: np.ndarray) -> np.ndarray:
     return df[name].to_numpy(float)[rows] if name in df.columns else np.full(len(rows), np.nan)
 
 
-def _read_imu(files: list[Path]) -> dict[str, RawImu]:
+def _pressure(df: pd.DataFrame, pressure: dict[str, tuple[np.ndarray, np.ndarray]],
+              where: Callable[[int], str]) -> pd.DataFrame:
+    """Move the table's :data:`PRESSURE` readings (non-empty cells) into ``pressure`` (walk -> times, hPa);
+    the table without the column. A reading outside :data:`PRESSURE_RANGE_HPA` is an input error."""
+    if PRESSURE not in df:
+        return df
+    p = df[PRESSURE].to_numpy(float)
+    ok = np.isfinite(p)
+    bad = np.flatnonzero(ok & ((p < PRESSURE_RANGE_HPA[0]) | (p > PRESSURE_RANGE_HPA[1])))
+    if len(bad):
+        raise InputError(f"{PRESSURE} {p[bad[0]]:g} outside {PRESSURE_RANGE_HPA} hPa (a barometer's reading "
+                         "in hPa = mbar?)", where(int(bad[0])))
+    for wid, rows in df[ok].groupby("walk_id", sort=False).indices.items():
+        part = df[ok].iloc[rows]
+        pressure[str(wid)] = (part["t_s"].to_numpy(float), part[PRESSURE].to_numpy(float))
+    return df.drop(columns=[PRESSURE])
+
+
+def _read_imu(files: list[Path], pressure: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, RawImu]:
     """Each walk's raw phone IMU from the ``imu`` files (times must increase within a walk)."""
     out: dict[str, RawImu] = {}
     for f in files:
@@ -387,6 +410,7 @@ def _read_imu(files: list[Path]) -> dict[str, RawImu]:
         check_columns(loc, IMU_REQ, IMU_OPT)
         coerce(loc, {**IMU_REQ, **IMU_OPT})
         df = loc.df
+        _pressure(df, pressure, loc.where)
         first = 2 if loc.csv else 1   # CSV line of row 0 (after the header) / Parquet row number
         for wid, rows in df.groupby("walk_id", sort=False).indices.items():
             if wid in out:
@@ -450,9 +474,11 @@ class RmbuildSchemaReader(Reader):
             if mode is POSE_INC:
                 loc.df = _integrate_increments(loc.df)
             parts.append(loc)
-        imu = _read_imu(by_table.get("imu", []))
+        pressure: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        imu = _read_imu(by_table.get("imu", []), pressure)
         if parts:
             poses, where["poses"] = _concat(parts)
+            poses = _pressure(poses, pressure, where["poses"])
         else:
             poses = pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64) for c in POSE_ABS})
 
@@ -490,6 +516,7 @@ class RmbuildSchemaReader(Reader):
             truth_poses=tables.get("truth/poses"),
             imu=imu,
             where=where,
+            pressure=pressure,
         )
         if skipped:
             raw.skipped["unrecognised file"] = skipped
