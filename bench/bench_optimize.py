@@ -279,15 +279,33 @@ def main() -> None:
         print(json.dumps(real_case(a.real[0], a.real[1])))
         return
     results = {"cases": [], "seeds": [], "holdout": [], "real": []}
+    _run_seeds(results)
+    _run_cases(results, a.skip_large, a.seed)
+    if not a.skip_real and DATASETS.exists():
+        _run_real(results)
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(results, indent=1))
+    _print_cases(results)
+    _print_seeds(results)
+    _print_real(results)
+
+
+def _sub(args: list[str]) -> tuple[dict | None, list[str]]:
+    """One case in a fresh process: (its JSON result, None) or (None, the last line of its error)."""
+    p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", *args], capture_output=True, text=True)
+    if p.returncode != 0:
+        return None, p.stderr.strip().splitlines()[-1:]
+    return json.loads(p.stdout.strip().splitlines()[-1]), []
+
+
+def _run_seeds(results: dict) -> None:
     runs = [(seed, mode, "seeds") for seed in SEEDS for mode in SEED_MODES]
     runs += [(seed, "robust", "holdout") for seed in HOLDOUT_SEEDS]
     for seed, mode, section in runs:
-        p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--case", "default", mode, str(seed)],
-                           capture_output=True, text=True)
-        if p.returncode != 0:
-            results[section].append({"seed": seed, "mode": mode, "error": p.stderr.strip().splitlines()[-1:]})
+        c, err = _sub(["--case", "default", mode, str(seed)])
+        if c is None:
+            results[section].append({"seed": seed, "mode": mode, "error": err})
             continue
-        c = json.loads(p.stdout.strip().splitlines()[-1])
         o = c["optimized"]
         results[section].append({"seed": seed, "mode": mode, "linked_walks": c["linked_walks"],
                                  "walks": c["walks"], "landmark_error_m": o["landmark_error_m"],
@@ -297,27 +315,24 @@ def main() -> None:
                                  "raw_landmark_error_m": c["raw"]["landmark_error_m"],
                                  "pairs_true_lt5m": c.get("pairs_true_lt5m"),
                                  "optimize_s": c["time_s"]["optimize_total"]})
+
+
+def _run_cases(results: dict, skip_large: bool, seed: int) -> None:
     for preset, mode in CASES + SCALING:
-        if a.skip_large and preset.startswith("large"):
+        if skip_large and preset.startswith("large"):
             continue
-        p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--case", preset, mode, str(a.seed)],
-                           capture_output=True, text=True)
-        if p.returncode != 0:
-            results["cases"].append({"preset": preset, "mode": mode, "error": p.stderr.strip().splitlines()[-1:]})
-            continue
-        results["cases"].append(json.loads(p.stdout.strip().splitlines()[-1]))
-    if not a.skip_real and DATASETS.exists():
-        for floor in ILC_FLOORS:
-            for mode in ("robust", "paper") + (("anchors",) if floor == "F1" else ()):
-                p = subprocess.run([sys.executable, "-m", "bench.bench_optimize", "--real", floor, mode],
-                                   capture_output=True, text=True)
-                if p.returncode != 0:
-                    results["real"].append({"floor": floor, "mode": mode,
-                                            "error": p.stderr.strip().splitlines()[-1:]})
-                    continue
-                results["real"].append(json.loads(p.stdout.strip().splitlines()[-1]))
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(results, indent=1))
+        c, err = _sub(["--case", preset, mode, str(seed)])
+        results["cases"].append(c if c is not None else {"preset": preset, "mode": mode, "error": err})
+
+
+def _run_real(results: dict) -> None:
+    for floor in ILC_FLOORS:
+        for mode in ("robust", "paper") + (("anchors",) if floor == "F1" else ()):
+            c, err = _sub(["--real", floor, mode])
+            results["real"].append(c if c is not None else {"floor": floor, "mode": mode, "error": err})
+
+
+def _print_cases(results: dict) -> None:
     print("| preset | mode | poses | lm err mean/max m | heading err mean/std deg | ATE mean m | "
           "pair search s | solve s | total s | floor s | peak MB |\n|" + "---|" * 11)
     for c in results["cases"]:
@@ -337,6 +352,9 @@ def main() -> None:
         print(f"\nchain reduction on large: {red['poses_solved']} of {red['poses']} poses solved, solve "
               f"{red['time_s']['solve']:.1f} s vs {full['time_s']['solve']:.1f} s for the full graph "
               f"({full['time_s']['solve'] / max(red['time_s']['solve'], 1e-9):.1f}x)")
+
+
+def _print_seeds(results: dict) -> None:
     print("\n| default seed | mode | linked | landmark err mean / max m | heading err mean deg |\n"
           "|---|---|---|---|---|")
     for c in results["seeds"]:
@@ -373,6 +391,9 @@ def main() -> None:
               f"{np.median([c['landmark_error_m']['max'] for c in hold]):.2f} m, heading mean "
               f"{np.mean([c['heading_alignment_error_deg']['mean'] for c in hold]):.2f} deg, "
               f"{sum(c['linked_walks'] for c in hold)} of {sum(c['walks'] for c in hold)} walks linked")
+
+
+def _print_real(results: dict) -> None:
     print("\n| floor | mode | linked | landmark raw / opt / linked-only mean m | built / surveyed kNN median m |\n"
           "|---|---|---|---|---|")
     for c in results["real"]:
