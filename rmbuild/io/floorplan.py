@@ -59,9 +59,11 @@ def check_plan_frame(doc: dict, fixes_xy: np.ndarray) -> dict | None:
     label = doc.get("source") or doc.get("name") or "(unnamed)"
     head = f"floor plan {label}: only {share:.0%} of the {len(xy)} fixes lie in its walkable space (1 m)"
     if c["best_inside"] >= MIN_FIXES_INSIDE:
-        out["warning"] = (f"{head}, {c['best_inside']:.0%} once moved {c['moved_m']:.0f} m on average (turned "
-                          f"{c['turn_deg']:+.0f} deg about their centre): is it in another frame?")
+        dx, dy = c["shift_m"]
+        move = (f"moved by ({dx:+.0f}, {dy:+.0f}) m" if c["turn_deg"] == 0 else
+                f"turned {c['turn_deg']:+.0f} deg about their centre and shifted ({c['moved_m']:.0f} m on average)")
+        out["warning"] = f"{head}, {c['best_inside']:.0%} once {move}: it looks to be in another frame"
     else:
-        out["warning"] = (f"{head}, and no shift or turn fits them (at best {c['best_inside']:.0%}): is it "
-                          "another floor's plan, or mirrored?")
+        out["warning"] = (f"{head}, and no shift or turn fits them (at best {c['best_inside']:.0%}): it looks "
+                          "like another floor's plan, or a mirrored one")
     return out

@@ -117,7 +117,7 @@ class FloorPlanSource(EvidenceSource):
         world), or None (module docstring); the figures go to the report."""
         compass = best_translation(self.mask, self.origin, xy)
         full = best_translation(self.mask, self.origin, xy, PLAN_CHECK_TURNS_DEG)
-        turn = float((full["turn_deg"] - compass["turn_deg"] + 180.0) % 360.0 - 180.0)
+        turn = float((full["turn_deg"] + 180.0) % 360.0 - 180.0)  # from the compass's north
         gain = full["inside"] - compass["inside"]
         self.fit = {"frame_check": {"compass_inside": round(compass["inside"], 3),
                                     "best_turn_deg": turn, "best_turn_inside": round(full["inside"], 3)}}
@@ -125,7 +125,7 @@ class FloorPlanSource(EvidenceSource):
             return f"only {compass['inside']:.0%} of the map's poses fit its walkable space"
         if gain >= PLAN_TURN_GAIN and abs(turn) >= PLAN_TURN_MIN_DEG:
             return (f"the map fits it better turned {turn:+.0f} deg from the compass's north ({full['inside']:.0%} "
-                    f"of the poses inside, {compass['inside']:.0%} unturned): is the plan rotated or mirrored?")
+                    f"of the poses inside, {compass['inside']:.0%} unturned): it looks rotated or mirrored")
         return None
 
     def prepare(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:
