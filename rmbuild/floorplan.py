@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from rmbuild import geometry
+
 # m; cell of the distance field
 FIELD_RESOLUTION_M = 0.5
 # m; the field extends this far beyond the plan
@@ -247,3 +249,56 @@ def _all_coords(c) -> list:
     if isinstance(c, (list, tuple)) and len(c) >= 2 and all(isinstance(v, (int, float)) for v in c[:2]):
         return [list(c[:2])]
     return [p for sub in (c or []) for p in _all_coords(sub)]
+
+
+# m; raster cell of the frame check's search, and how near walkable space a fix counts as in it
+FRAME_CELL_M = 1.0
+FRAME_TOLERANCE_M = 1.0
+# deg; step of the frame check's turns over the full circle
+FRAME_TURN_STEP_DEG = 5.0
+
+
+def frame_correction(plan: FloorPlan, xy: np.ndarray) -> dict:
+    """How well points ``xy`` (n, 2; the data's fixes) fit the plan as it is, and the SE(2) correction that
+    fits them best: a turn about their centroid (every FRAME_TURN_STEP_DEG over the full circle), then the
+    translation that puts most of them within FRAME_TOLERANCE_M of walkable space (FFT cross-correlation of
+    their raster with the walkable mask, any overlap; each turn's best re-measured exactly). {"inside": share
+    as given, "best_inside": share after the correction, "turn_deg", "shift_m" [dx, dy] (applied after the
+    turn about their centroid), "moved_m": how far the correction moves the points, on average; no
+    correction (0) unless it fits more points than the plan as given}."""
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    inside = float(plan.inside(xy, FRAME_TOLERANCE_M).mean())
+    out: dict = {"inside": inside, "best_inside": inside, "turn_deg": 0.0, "shift_m": [0.0, 0.0], "moved_m": 0.0}
+    grid, origin, res = plan.distance_field()
+    step = max(1, int(round(FRAME_CELL_M / res)))
+    mask = (grid[::step, ::step] <= FRAME_TOLERANCE_M).astype(float)
+    cen = xy.mean(axis=0)
+    for turn in np.arange(0.0, 360.0, FRAME_TURN_STEP_DEG):
+        p = (xy - cen) @ geometry.rot(np.radians(turn)).T + cen
+        score, t = _correlate_full(mask, np.asarray(origin), step * res, p)
+        shift = t(np.unravel_index(int(np.argmax(score)), score.shape))
+        share = float(plan.inside(p + shift, FRAME_TOLERANCE_M).mean())
+        if share * len(xy) > out["best_inside"] * len(xy) + 0.5:
+            out.update(best_inside=share, turn_deg=float((turn + 180.0) % 360.0 - 180.0),
+                       shift_m=[float(shift[0]), float(shift[1])],
+                       moved_m=float(np.linalg.norm(p + shift - xy, axis=1).mean()))
+    return out
+
+
+def _correlate_full(mask: np.ndarray, origin: np.ndarray, cell: float, p: np.ndarray):
+    """(score: points of ``p`` on ``mask`` for every shift that overlaps them, the translation of a score
+    cell)."""
+    from scipy import signal  # imported here: scipy.signal costs ~1 s at import, and most runs use no plan
+
+    lo = p.min(axis=0)
+    ij = np.floor((p - lo) / cell).astype(int)
+    occ = np.zeros((ij[:, 1].max() + 1, ij[:, 0].max() + 1))
+    np.add.at(occ, (ij[:, 1], ij[:, 0]), 1.0)
+    score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="full")
+    h, w = occ.shape
+
+    def shift(cell_rc) -> np.ndarray:  # the points' cell (0, 0) (its centre) on mask sample (r - h + 1, c - w + 1)
+        return origin + cell * np.array([cell_rc[1] - w + 1, cell_rc[0] - h + 1]) - lo - cell / 2
+
+    return score, shift

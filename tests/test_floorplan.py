@@ -80,7 +80,7 @@ def test_user_plan_in_lonlat_and_metres(tmp_path):
     """A user's plan in WGS84 lon/lat is projected to metres about its south-west corner; one in local metres
     is taken as it is; anything else is a one-line error naming the file."""
     from rmbuild.errors import InputError
-    from rmbuild.io.floorplan import fixes_inside_share, read_user_plan
+    from rmbuild.io.floorplan import check_plan_frame, read_user_plan
 
     lon0, lat0 = 11.0, 48.0
     dlon, dlat = 40.0 / (111_320 * np.cos(np.radians(lat0))), 20.0 / 110_570  # ~40 m x 20 m
@@ -92,7 +92,8 @@ def test_user_plan_in_lonlat_and_metres(tmp_path):
     b = from_features(doc["features"], lambda a: a).bounds
     assert b[0] == pytest.approx(0, abs=0.01) and b[2] == pytest.approx(40, rel=0.01)
     assert b[3] == pytest.approx(20, rel=0.01)
-    assert fixes_inside_share(doc, np.array([[5.0, 5.0], [39.0, 19.0], [60.0, 5.0], [20.0, -10.0]])) == 0.5
+    check = check_plan_frame(doc, np.array([[5.0, 5.0], [39.0, 19.0], [60.0, 5.0], [20.0, -10.0]]))
+    assert check["fixes_inside"] == 0.5 and check["wrong_frame"] and "geo.geojson" in check["warning"]
 
     local = {"type": "FeatureCollection", "frame": "local_m", "features": [_rect(0, 0, 30, 10, type="floor")]}
     (tmp_path / "local.geojson").write_text(json.dumps(local))

@@ -14,7 +14,7 @@ from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
 from rmbuild.ingest_floors import floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
-from rmbuild.io.floorplan import MIN_FIXES_INSIDE, fixes_inside_share, read_user_plan
+from rmbuild.io.floorplan import check_plan_frame, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
 from rmbuild.io.formats.base import RawInput
 from rmbuild.io.lock import workspace_lock
@@ -167,12 +167,13 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
 
 
 def _plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:
-    """What the report says of the floor plan; a warning when the fixes mostly fall outside it."""
+    """What the report says of the floor plan: its name and the check of its frame against the fixes
+    (:func:`rmbuild.io.floorplan.check_plan_frame`), whose warning joins ``warnings``."""
     if plan is None:
         return None
     fixes = ds.fixes[["x_m", "y_m"]].to_numpy(float) if ds.fixes is not None and len(ds.fixes) else np.empty((0, 2))
-    share = fixes_inside_share(plan, fixes)
-    if share is not None and share < MIN_FIXES_INSIDE:
-        warnings.append(f"floor plan: only {share:.0%} of the fixes lie in its walkable space (1 m tolerance); "
-                        "is the plan in the fixes' frame?")
-    return {"name": plan.get("name", ""), "fixes_inside": None if share is None else round(share, 3)}
+    check = check_plan_frame(plan, fixes)
+    if check is not None and check.get("warning"):
+        warnings.append(check["warning"])
+    return {"name": plan.get("name", ""), "fixes_inside": None if check is None else check["fixes_inside"],
+            "frame_check": check}

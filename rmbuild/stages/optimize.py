@@ -17,6 +17,7 @@ from rmbuild.errors import InputError
 from rmbuild.evaluate.trajectory import trajectory_metrics
 from rmbuild.floorplan import FloorPlan, from_local_geojson
 from rmbuild.io.anchors import check_anchors, read_anchors
+from rmbuild.io.floorplan import check_plan_frame
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -24,8 +25,6 @@ from rmbuild.stages.view import log_workspace
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
-#: share of the reference component's poses in walkable space below which the plan fit is reported as doubtful
-PLAN_FIT_WARN_INSIDE = 0.5
 
 
 def tum_text(poses: pd.DataFrame) -> str:
@@ -78,11 +77,14 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     ws.check_can_write("optimize", force)
     on_progress = _progress_adapter(progress, viewer)
     anchor_table = anchors.table if anchors is not None else None
-    plan = _floor_plan(ws, cfg)
+    plan, plan_check = _floor_plan(ws, cfg, ds)
     result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress, floorplan=plan)
     has_anchors = anchor_table is not None and len(anchor_table) > 0
-    gauge = "anchors" if has_anchors else "floorplan" if plan is not None else "se2"
-    _warn_plan_fit(result.stats)
+    gauge = "anchors" if has_anchors else "floorplan" if result.stats.get("frame") == "floorplan" else "se2"
+    if plan_check is not None:
+        result.stats["floorplan_check"] = plan_check
+        result.stats["warnings"] = [*result.stats.get("warnings", []), *([plan_check["warning"]]
+                                                                         if plan_check.get("warning") else [])]
     return _write(ws, ds, cfg, result, gauge, anchor_table, progress, viewer, t0)
 
 
@@ -186,21 +188,23 @@ def _progress_adapter(progress: Progress, viewer: Viewer):
     return on_progress
 
 
-def _floor_plan(ws: Workspace, cfg: OptimizeConfig) -> FloorPlan | None:
-    """The workspace's floor plan when the config asks for it; an error when it asks and there is none."""
+def _floor_plan(ws: Workspace, cfg: OptimizeConfig, ds) -> tuple[FloorPlan | None, dict | None]:
+    """The workspace's floor plan when the config asks for it, and the check of its frame against the data's
+    fixes (:func:`rmbuild.io.floorplan.check_plan_frame`); a plan in another frame than the fixes is not
+    used (warned). An error when the config asks for a plan and there is none."""
     if not cfg.floorplan.use:
-        return None
+        return None, None
     if not ws.exists("data.floorplan"):
         raise InputError("optimize.floorplan.use = true, but the workspace has no floor plan "
                          "(`rmbuild ingest --floorplan FILE`)", str(ws.path("data.floorplan")))
-    return from_local_geojson(ws.read_json("data.floorplan"))
-
-
-def _warn_plan_fit(stats: dict) -> None:
-    fit = (stats.get("evidence") or {}).get("floorplan")
-    if fit and fit.get("inside", 1.0) < PLAN_FIT_WARN_INSIDE:
-        log.warning(f"floor plan: only {fit['inside']:.0%} of the reference component's poses fit its walkable "
-                    "space; the map may not sit in the plan's frame")
+    doc = ws.read_json("data.floorplan")
+    fixes = ds.fixes[["x_m", "y_m"]].to_numpy(float) if ds.fixes is not None and len(ds.fixes) else np.empty((0, 2))
+    check = check_plan_frame(doc, fixes)
+    if check is not None and check["wrong_frame"]:
+        check["warning"] += "; the plan is not used (the map stays in the reference walk's frame)"
+        log.warning(check["warning"])
+        return None, check
+    return from_local_geojson(doc), check
 
 
 def _num(m: dict | None, key: str) -> float | None:

@@ -8,6 +8,12 @@
   component only when its best fit is distinct — it keeps PLAN_MIN_INSIDE of its poses inside and leads the
   best fit elsewhere (more than PLAN_DISTINCT_M away) by PLAN_MARGIN of the poses — and it is then
   reported as placed by the plan.
+- Frame check: the plan is not used (the map stays in the reference walk's frame, with a warning) when
+  under PLAN_FRAME_MIN_INSIDE of the reference component's poses fit it, or when they fit it clearly better
+  (PLAN_TURN_GAIN of the poses) turned more than PLAN_TURN_MIN_DEG from the compass's north, searched over
+  the full circle: the plan is then rotated (or mirrored) against north. A shifted plan, or another floor's
+  with similar corridors, cannot be told apart here (the fit follows the plan): the data's fixes can
+  (:func:`rmbuild.io.floorplan.check_plan_frame`).
 - Solve: after each solve every keyframe pose outside walkable space (by more than PLAN_TOLERANCE_M) gets a
   robust (Huber) position prior towards the nearest walkable point, sigma PLAN_SIGMA_M; the associations
   are renewed after each solve.
@@ -34,6 +40,14 @@ PLAN_TURNS_DEG = (-6.0, -3.0, 0.0, 3.0, 6.0)
 PLAN_MIN_INSIDE = 0.8
 PLAN_MARGIN = 0.15
 PLAN_DISTINCT_M = 10.0
+# the frame check (module docstring). Measured on the five MS ILC 2.0 floors (reference component, plan
+# right -> turned 20/90/180 deg, mirrored, another floor's): the right plans keep 78-94 % of the poses
+# inside and gain at most 0.058 turned elsewhere (site2/B1, -55 deg); turned plans gain up to 0.22
+PLAN_FRAME_MIN_INSIDE = 0.5
+PLAN_TURN_GAIN = 0.09
+PLAN_TURN_MIN_DEG = 15.0
+# deg; the turns of the frame check's full-circle search
+PLAN_CHECK_TURNS_DEG = tuple(float(a) for a in range(0, 360, 5))
 # m; poses outside walkable space by more than this get a wall prior; its sigma and Huber width (sigmas)
 PLAN_TOLERANCE_M = 0.5
 PLAN_SIGMA_M = 1.0
@@ -54,6 +68,7 @@ class FloorPlanSource(EvidenceSource):
         self.nodes = np.zeros(0, np.int64)
         self.targets = np.zeros((0, 2))
         self.fit: dict = {}
+        self.used = True  # False when the frame check refused the plan: no frame, no wall priors
 
     def place(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:
         """Move the components into the plan's frame (module docstring)."""
@@ -61,10 +76,19 @@ class FloorPlanSource(EvidenceSource):
         if not self.rot.known[ref]:
             self.warnings.append("floor plan: the reference walk has no compass heading; the map is not put "
                                  "into the plan's frame")
+            self.used = False
             return
         T = placement.world_T_walk
+        walk_frame = T.copy()
         T[:] = geometry.compose(np.array([0.0, 0.0, self.rot.theta[ref]]), T)  # into the compass world
         comp = placement.component
+        problem = self._frame_check(walks.apply_frames(T)[(comp == 0)[walks.walk_of], :2])
+        if problem:
+            T[:] = walk_frame
+            self.used = False
+            label = f"floor plan {self.plan.name}" if self.plan.name else "floor plan"
+            self.warnings.append(f"{label}: {problem}; not used (the map stays in the reference walk's frame)")
+            return
         fits = {}
         for c in np.unique(comp):
             members = comp == c
@@ -83,16 +107,36 @@ class FloorPlanSource(EvidenceSource):
             if c != 0:
                 placement.component[members] = 0
                 placement.method[members] = "floorplan"
-        self.fit = {"inside": round(fits[0]["inside"], 3), "turn_deg": fits[0]["turn_deg"],
+        self.fit = {**self.fit, "inside": round(fits[0]["inside"], 3), "turn_deg": fits[0]["turn_deg"],
                     "placed_components": int(sum(1 for c, f in fits.items() if c != 0 and _distinct(f)))}
         placement.frame = "floorplan"
         placement.frame_rotation = float(self.rot.theta[ref] + np.radians(fits[0]["turn_deg"]))
 
+    def _frame_check(self, xy: np.ndarray) -> str | None:
+        """What looks wrong with the plan's frame for the reference component's poses ``xy`` (compass
+        world), or None (module docstring); the figures go to the report."""
+        compass = best_translation(self.mask, self.origin, xy)
+        full = best_translation(self.mask, self.origin, xy, PLAN_CHECK_TURNS_DEG)
+        turn = float((full["turn_deg"] + 180.0) % 360.0 - 180.0)  # from the compass's north
+        gain = full["inside"] - compass["inside"]
+        self.fit = {"frame_check": {"compass_inside": round(compass["inside"], 3),
+                                    "best_turn_deg": turn, "best_turn_inside": round(full["inside"], 3)}}
+        if compass["inside"] < PLAN_FRAME_MIN_INSIDE:
+            return f"only {compass['inside']:.0%} of the map's poses fit its walkable space"
+        if gain >= PLAN_TURN_GAIN and abs(turn) >= PLAN_TURN_MIN_DEG:
+            return (f"the map fits it better turned {turn:+.0f} deg from the compass's north ({full['inside']:.0%} "
+                    f"of the poses inside, {compass['inside']:.0%} unturned): it looks rotated or mirrored")
+        return None
+
     def prepare(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:
+        if not self.used:
+            return
         nodes = np.flatnonzero(placement.linked[walks.walk_of])
         self._associate(init_xyt, nodes)
 
     def factors(self, state: SolveState) -> list:
+        if not self.used:
+            return []
         noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(PLAN_HUBER_K),
                                                gtsam.noiseModel.Isotropic.Sigma(2, PLAN_SIGMA_M))
         keep = np.isin(self.nodes, state.keyframes) if state.keyframes is not None else np.ones(len(self.nodes), bool)
@@ -101,6 +145,8 @@ class FloorPlanSource(EvidenceSource):
 
     def update(self, state: SolveState) -> Update:
         """Re-associate the keyframe poses outside walkable space with their nearest walkable points."""
+        if not self.used:
+            return Update()
         kf = state.keyframes if state.keyframes is not None else np.arange(len(state.poses))
         before = self.nodes
         self._associate(state.poses, kf[state.placement.linked[self.walks.walk_of[kf]]])
@@ -112,7 +158,8 @@ class FloorPlanSource(EvidenceSource):
         self.targets = nearest_walkable(self.plan, poses[self.nodes, :2])
 
     def report(self) -> dict:
-        return {**self.fit, "wall_priors": int(len(self.nodes)), "walkable_m2": round(self.plan.area_m2, 1)}
+        return {**self.fit, "used": self.used, "wall_priors": int(len(self.nodes)),
+                "walkable_m2": round(self.plan.area_m2, 1)}
 
 
 def _distinct(fit: dict) -> bool:
@@ -128,13 +175,14 @@ def _walkable_mask(plan: FloorPlan) -> tuple[np.ndarray, np.ndarray]:
     return np.exp(-0.5 * (d / PLAN_SOFT_M) ** 2), np.array([ox, oy])
 
 
-def best_translation(mask: np.ndarray, origin: np.ndarray, xy: np.ndarray) -> dict:
-    """The translation (and turn about the points' centroid, PLAN_TURNS_DEG) that puts the most points
+def best_translation(mask: np.ndarray, origin: np.ndarray, xy: np.ndarray,
+                     turns: tuple[float, ...] = PLAN_TURNS_DEG) -> dict:
+    """The translation (and turn about the points' centroid, one of ``turns``) that puts the most points
     ``xy`` (n, 2) inside ``mask``: {"t" (2,), "turn_deg", "inside" (share), "second" (share of the best fit
     more than PLAN_DISTINCT_M from it)}."""
     best: dict = {"inside": -1.0}
     cen = xy.mean(axis=0)
-    for turn in PLAN_TURNS_DEG:
+    for turn in turns:
         p = (xy - cen) @ geometry.rot(np.radians(turn)).T
         score, t = _correlate(mask, origin, p)
         if score.max() > best["inside"] * len(xy) - 1e-9:
@@ -175,7 +223,10 @@ def _correlate(mask: np.ndarray, origin: np.ndarray, p: np.ndarray):
     np.add.at(occ, (ij[:, 1], ij[:, 0]), 1.0)
     from scipy import signal  # imported here: scipy.signal costs ~1 s at import, and most runs use no plan
 
-    score = signal.fftconvolve(mask.astype(float), occ[::-1, ::-1], mode="valid")
+    # points spread wider than the plan (a plan of another floor or turned): pad the mask beyond its far edges
+    grow = np.maximum(np.array(occ.shape) - np.array(mask.shape), 0)
+    mask = np.pad(mask.astype(float), ((0, grow[0]), (0, grow[1])))
+    score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="valid")
 
     def shift(cell) -> np.ndarray:  # translation putting p's raster cell (0, 0) (its centre) on mask sample ``cell``
         return origin + PLAN_CELL_M * np.array([cell[1], cell[0]]) - lo - PLAN_CELL_M / 2
