@@ -92,6 +92,7 @@ def test_ingest_reports_and_optimize_does_not_use_a_shifted_plan(tmp_path, capsy
     res = run_cli(capsys, "ingest", sim, "-w", ws, "--floorplan", tmp_path / "shifted.geojson")
     assert res.code == 0, res.err
     assert "shifted.geojson" in res.err and "another frame" in res.err
+    assert "its frame looks wrong" in res.out
     check = json.loads((ws / "data" / "report.json").read_text())["floorplan"]["frame_check"]
     assert check["wrong_frame"] and check["fixes_inside"] < 0.9 and check["correction"]["fixes_inside"] == 1.0
     cfg = tmp_path / "fp.toml"

@@ -59,7 +59,9 @@ def ingest(inputs, workspace, fmt, floorplan, append, rerun, config_path, force,
         if f.get("floorplan"):
             fp = f["floorplan"]
             inside = "" if fp["fixes_inside"] is None else f" ({fp['fixes_inside']:.0%} of the fixes inside)"
-            click.echo(f"floor plan {fp['name'] or '(unnamed)'} kept{inside}")
+            doubt = "; its frame looks wrong (warning above): not used by optimize" \
+                if (fp.get("frame_check") or {}).get("warning") else ""
+            click.echo(f"floor plan {fp['name'] or '(unnamed)'} kept{inside}{doubt}")
     for note in notes:
         click.echo(f"note: {note}", err=True)
 
