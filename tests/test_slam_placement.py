@@ -295,6 +295,9 @@ def test_a_walk_its_compass_misplaces_is_left_unlinked_not_placed_wrong():
     w = r.walks.set_index("walk_id")
     assert not w.loc["w001", "linked"] and w.loc["w001", "placement"] == "refuted"
     assert w["linked"].sum() == 4 and r.stats["refuted_walks"] == ["w001"]
+    assert w.loc["w001", "rf_log_lr"] < -0.5 and w.loc["w001", "rf_overlap_scans"] >= 5  # the figure that refuted it
+    judged = w[w["linked"] & w["rf_log_lr"].notna()]
+    assert len(judged) >= 2 and (judged["rf_log_lr"] > -0.5).all()
     assert any("RF check" in m and "w001" in m for m in r.stats["warnings"])
     others = [f"w00{i}" for i in (0, 2, 3, 4)]
     assert trajectory_metrics(r.poses, ds, fit_walks=others)["landmark_error_fitted_walks_m"]["mean"] < 1.5

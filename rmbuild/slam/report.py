@@ -18,7 +18,9 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
     """Per walk: walk_id, n_poses, linked, component, reference, n_cross_pairs, n_partner_walks,
     shared_path_m, world_T_walk_x_m / _y_m / _theta_rad, heading_known, extent_ratio, predicted_error_m
     (:mod:`rmbuild.slam.uncertainty`; NaN for walks not placed), placement, placement_round,
-    placement_inliers, anchored, scale, scale_fitted."""
+    placement_inliers, anchored, scale, scale_fitted, rf_overlap_scans / rf_log_lr (the RF check's figures:
+    scans overlapping the walks placed before it, their mean log likelihood ratio near vs far; NaN when not
+    judged)."""
     n_walks = walks.n_walks
     n_cross, _, shared, partners = _cross_pair_counts(walks, pairs)
     linked = placement.linked & walks.keep
@@ -38,7 +40,13 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
         "placement_inliers": placement.n_inliers if placement.n_inliers is not None else np.zeros(n_walks, int),
         "anchored": anchored,
         "scale": outcome.scale, "scale_fitted": outcome.scale_fitted,
+        "rf_overlap_scans": _or(placement.rf_overlap_scans, np.zeros(n_walks, np.int64)),
+        "rf_log_lr": _or(placement.rf_log_lr, np.full(n_walks, np.nan)),
     })
+
+
+def _or(a: np.ndarray | None, default: np.ndarray) -> np.ndarray:
+    return a if a is not None else default
 
 
 def _cross_pair_counts(walks: WalkSet, pairs: pd.DataFrame):

@@ -81,8 +81,9 @@ class Placement:
     ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
     ``round_placed`` / ``n_inliers`` / ``shared_m`` (n_walks,): the growth round a walk was placed in (-1
     never, 0 for seeds), its inlier scans and shared path (m) then; ``refuted`` the walks the RF check
-    (:mod:`.rfcheck`) took out of the reference component; ``order`` (n_walks,) the placement event that put
-    each walk where it is (:class:`GrowState`).
+    (:mod:`.rfcheck`) took out of the reference component, ``rf_overlap_scans`` / ``rf_log_lr`` (n_walks,) the
+    check's figures; ``order`` (n_walks,) the placement event that put each walk where it is
+    (:class:`GrowState`).
     """
 
     world_T_walk: np.ndarray
@@ -105,6 +106,8 @@ class Placement:
     shared_m: np.ndarray | None = None
     refuted: list[int] = field(default_factory=list)
     order: np.ndarray | None = None
+    rf_overlap_scans: np.ndarray | None = None
+    rf_log_lr: np.ndarray | None = None
 
     @property
     def linked(self) -> np.ndarray:

@@ -54,12 +54,15 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
     placed onto a wrong one agree with it. Each walk is judged against the walks placed before it
     (``placement.order``; all the others when the placement has no order).
     Returns them in that order. The reference walk is kept. ``row_xy``: each fingerprint row's position
-    (default: where the placement puts it)."""
+    (default: where the placement puts it). Each judged walk's last figure goes to ``placement.rf_overlap_scans``
+    / ``placement.rf_log_lr`` (a refuted walk's: the one that refuted it; NaN for walks not judged)."""
     check = OverlapCheck(walks, sim)
     comp = placement.component
     xy = walks.world_xy(placement.world_T_walk, sim.row_node) if row_xy is None else row_xy
     out: list[int] = []
     most = MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1)
+    placement.rf_overlap_scans = np.zeros(walks.n_walks, np.int64)
+    placement.rf_log_lr = np.full(walks.n_walks, np.nan)
     while len(out) < most:
         worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
         for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
@@ -69,6 +72,7 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
             if placement.order is not None:  # the map the walk was placed onto, not walks placed onto it
                 others = others[placement.order[check.row_walk[others]] < placement.order[w]]
             ev = check.evidence(w, xy[check.rows_of[w]], others, xy[others])
+            placement.rf_overlap_scans[w], placement.rf_log_lr[w] = ev.n_overlap, ev.mean_log_lr
             if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
                 worst, worst_llr = w, ev.mean_log_lr
         if worst < 0:
