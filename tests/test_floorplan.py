@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from rmbuild.floorplan import from_features, from_ilc
-from tests.conftest import SHARED_DATASETS
+from rmbuild.floorplan import from_features
+from tests.ilc_plans import ilc_plan_and_waypoints
 
 
 def _rect(x0, y0, x1, y1, **props):
@@ -34,19 +34,7 @@ def test_walkable_space_from_features():
 @pytest.mark.realdata
 @pytest.mark.parametrize("floor", ["site1/F1", "site2/B1"])
 def test_ilc_plan_puts_the_waypoints_in_walkable_space(floor):
-    root = SHARED_DATASETS / "msft-ilc20" / "data" / floor
-    if not root.is_dir():
-        pytest.skip("the MS ILC 2.0 data is not present")
-    import gzip
-
-    info = json.loads((root / "floor_info.json").read_text())["map_info"]
-    plan = from_ilc(json.loads((root / "geojson_map.json").read_text()), info["width"], info["height"])
-    pts = []
-    for f in sorted((root / "path_data_files").glob("*.txt.gz"))[:15]:
-        for line in gzip.open(f, "rt"):
-            p = line.split("\t")
-            if len(p) >= 4 and p[1] == "TYPE_WAYPOINT":
-                pts.append((float(p[2]), float(p[3])))
+    plan, pts, info = ilc_plan_and_waypoints(floor, 15)
     d = plan.distance(np.array(pts))
     assert len(pts) > 50 and np.mean(d <= 0.5) > 0.99  # measured: every waypoint of every floor inside
     lonlat = plan.georef.to_lonlat(np.array([[0.0, 0.0], [info["width"], info["height"]]]))

@@ -4,7 +4,6 @@ by optimize's own fit of the map to the plan (rmbuild/slam/evidence/floorplan.py
 
 from __future__ import annotations
 
-import gzip
 import json
 from dataclasses import replace
 
@@ -12,9 +11,9 @@ import numpy as np
 import pytest
 from shapely import affinity
 
-from rmbuild.floorplan import FloorPlan, from_features, from_ilc, to_geojson
+from rmbuild.floorplan import FloorPlan, from_features, to_geojson
 from rmbuild.io.floorplan import check_plan_frame
-from tests.conftest import SHARED_DATASETS
+from tests.ilc_plans import ilc_plan_and_waypoints
 
 
 def _moved(plan: FloorPlan, shift=(0.0, 0.0), turn_deg=0.0, mirror=False) -> FloorPlan:
@@ -105,18 +104,8 @@ def test_ingest_reports_and_optimize_does_not_use_a_shifted_plan(tmp_path, capsy
 
 
 def _ilc(floor: str):
-    root = SHARED_DATASETS / "msft-ilc20" / "data" / floor
-    if not root.is_dir():
-        pytest.skip("the MS ILC 2.0 data is not present")
-    info = json.loads((root / "floor_info.json").read_text())["map_info"]
-    plan = from_ilc(json.loads((root / "geojson_map.json").read_text()), info["width"], info["height"], floor)
-    pts = []
-    for f in sorted((root / "path_data_files").glob("*.txt.gz"))[:20]:
-        for line in gzip.open(f, "rt"):
-            p = line.split("\t")
-            if len(p) >= 4 and p[1] == "TYPE_WAYPOINT":
-                pts.append((float(p[2]), float(p[3])))
-    return plan, np.array(pts)
+    plan, pts, _ = ilc_plan_and_waypoints(floor, 20)
+    return plan, pts
 
 
 @pytest.mark.realdata
