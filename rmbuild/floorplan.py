@@ -276,7 +276,7 @@ def frame_correction(plan: FloorPlan, xy: np.ndarray) -> dict:
     cen = xy.mean(axis=0)
     for turn in np.arange(0.0, 360.0, FRAME_TURN_STEP_DEG):
         p = (xy - cen) @ geometry.rot(np.radians(turn)).T + cen
-        score, t = _correlate_full(mask, np.asarray(origin), step * res, p)
+        score, t = correlate_points(mask, np.asarray(origin), step * res, p, full=True)
         shift = t(np.unravel_index(int(np.argmax(score)), score.shape))
         share = float(plan.inside(p + shift, FRAME_TOLERANCE_M).mean())
         if share * len(xy) > out["best_inside"] * len(xy) + 0.5:
@@ -286,19 +286,29 @@ def frame_correction(plan: FloorPlan, xy: np.ndarray) -> dict:
     return out
 
 
-def _correlate_full(mask: np.ndarray, origin: np.ndarray, cell: float, p: np.ndarray):
-    """(score: points of ``p`` on ``mask`` for every shift that overlaps them, the translation of a score
-    cell)."""
+def correlate_points(mask: np.ndarray, origin: np.ndarray, cell: float, p: np.ndarray, full: bool = False):
+    """How many points ``p`` (n, 2) land on ``mask`` (rows y, columns x, cells of ``cell`` m, cell (0, 0) at
+    ``origin``) for every translation: an FFT cross-correlation of the points' raster (cells of ``cell`` from
+    their minimum) with the mask. ``full``: every translation that overlaps them at all; else those that keep
+    the points' raster within the mask (padded when the points spread wider than it). Returns (score, the
+    translation of a score cell (row, col))."""
     from scipy import signal  # imported here: scipy.signal costs ~1 s at import, and most runs use no plan
 
     lo = p.min(axis=0)
     ij = np.floor((p - lo) / cell).astype(int)
     occ = np.zeros((ij[:, 1].max() + 1, ij[:, 0].max() + 1))
     np.add.at(occ, (ij[:, 1], ij[:, 0]), 1.0)
-    score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="full")
-    h, w = occ.shape
+    mask = mask.astype(float)
+    if full:
+        off = np.array(occ.shape) - 1
+        score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="full")
+    else:
+        off = np.zeros(2, int)
+        grow = np.maximum(np.array(occ.shape) - np.array(mask.shape), 0)
+        mask = np.pad(mask, ((0, grow[0]), (0, grow[1])))
+        score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="valid")
 
-    def shift(cell_rc) -> np.ndarray:  # the points' cell (0, 0) (its centre) on mask sample (r - h + 1, c - w + 1)
-        return origin + cell * np.array([cell_rc[1] - w + 1, cell_rc[0] - h + 1]) - lo - cell / 2
+    def shift(cell_rc) -> np.ndarray:  # the points' raster cell (0, 0) (its centre) on mask sample cell_rc - off
+        return origin + cell * np.array([cell_rc[1] - off[1], cell_rc[0] - off[0]]) - lo - cell / 2
 
     return score, shift

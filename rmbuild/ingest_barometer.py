@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from rmbuild.ingest_checks import scan_ids
 from rmbuild.io.formats.base import RawInput
 from rmbuild.localize.floor import floor_distances
 from rmbuild.pdr.baro import floor_changes
@@ -68,10 +69,11 @@ def barometer_floors(raw: RawInput) -> dict[str, list[tuple[float, str]]] | None
 
 def _scans(wifi: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(walk id per scan, time per scan, float32 RSS matrix scans x APs with NaN for not heard)."""
-    key = wifi["walk_id"].astype(str) + "\x00" + wifi["t_s"].astype(float).map(repr)
-    scan, uniq = pd.factorize(key)
+    walk_codes, _ = pd.factorize(wifi["walk_id"].astype(str))
+    scan = scan_ids(walk_codes, wifi["t_s"].to_numpy(float)) if len(wifi) else np.zeros(0, np.int64)
     ap, _ = pd.factorize(wifi["bssid"].astype(str))
-    rss = np.full((len(uniq), int(ap.max()) + 1 if len(ap) else 0), np.nan, dtype=np.float32)
+    n_scans = int(scan.max()) + 1 if len(scan) else 0
+    rss = np.full((n_scans, int(ap.max()) + 1 if len(ap) else 0), np.nan, dtype=np.float32)
     rss[scan, ap] = wifi["rssi_dbm"].to_numpy(float)
     first = np.unique(scan, return_index=True)[1]
     return (wifi["walk_id"].astype(str).to_numpy()[first], wifi["t_s"].to_numpy(float)[first], rss)

@@ -25,7 +25,7 @@ import gtsam
 import numpy as np
 
 from rmbuild import geometry
-from rmbuild.floorplan import FloorPlan
+from rmbuild.floorplan import FloorPlan, correlate_points
 from rmbuild.slam.evidence.base import EvidenceSource, RotationPriors, SolveState, Update
 from rmbuild.slam.factors import X
 from rmbuild.slam.problem import WalkSet
@@ -184,7 +184,7 @@ def best_translation(mask: np.ndarray, origin: np.ndarray, xy: np.ndarray,
     cen = xy.mean(axis=0)
     for turn in turns:
         p = (xy - cen) @ geometry.rot(np.radians(turn)).T
-        score, t = _correlate(mask, origin, p)
+        score, t = correlate_points(mask, origin, PLAN_CELL_M, p)
         if score.max() > best["inside"] * len(xy) - 1e-9:
             i = np.unravel_index(int(np.argmax(score)), score.shape)
             far = _far_from(score.shape, i, PLAN_DISTINCT_M / PLAN_CELL_M)
@@ -212,26 +212,6 @@ def refine_fit(plan: FloorPlan, xy: np.ndarray, fit: dict) -> dict:
     if np.hypot(*(v[:2] - fit["t"])) > 2 * PLAN_CELL_M or abs(v[2] - fit["turn_deg"]) > 3.0:
         return fit
     return {**fit, "t": v[:2], "turn_deg": float(v[2]), "inside": -float(res.fun)}
-
-
-def _correlate(mask: np.ndarray, origin: np.ndarray, p: np.ndarray):
-    """(score (rows, cols): points of ``p`` inside ``mask`` for each shift, shift of a score cell) with the
-    points' raster placed relative to their minimum."""
-    lo = p.min(axis=0)
-    ij = np.floor((p - lo) / PLAN_CELL_M).astype(int)
-    occ = np.zeros((ij[:, 1].max() + 1, ij[:, 0].max() + 1))
-    np.add.at(occ, (ij[:, 1], ij[:, 0]), 1.0)
-    from scipy import signal  # imported here: scipy.signal costs ~1 s at import, and most runs use no plan
-
-    # points spread wider than the plan (a plan of another floor or turned): pad the mask beyond its far edges
-    grow = np.maximum(np.array(occ.shape) - np.array(mask.shape), 0)
-    mask = np.pad(mask.astype(float), ((0, grow[0]), (0, grow[1])))
-    score = signal.fftconvolve(mask, occ[::-1, ::-1], mode="valid")
-
-    def shift(cell) -> np.ndarray:  # translation putting p's raster cell (0, 0) (its centre) on mask sample ``cell``
-        return origin + PLAN_CELL_M * np.array([cell[1], cell[0]]) - lo - PLAN_CELL_M / 2
-
-    return score, shift
 
 
 def _far_from(shape, i, radius_cells: float) -> np.ndarray:
