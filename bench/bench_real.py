@@ -43,6 +43,8 @@ FLOORS = {
     "ipin/-2": ("ipin2023/logs", "ipin"),
 }
 STAGES = ("ingest", "optimize", "export-map", "evaluate")
+LINK_RADII_M, LINK_SHARED_M = (8.0, 12.0), 10.0  # "linkable": ≥ LINK_SHARED_M of true path within a radius
+LINK_GAP_S = 60.0  # ... or the same device's next recording within this gap (starting within the radius)
 SHARED_RADIUS_M = 5.0  # "shares its path": a point of the true path within this distance of another walk's
 PATH_STEP_M = 0.5  # resampling step of the waypoint polylines (distance error ≤ a quarter of it)
 WORSE_THAN_M = 10.0  # a linked walk "placed badly": its mean waypoint error after optimisation exceeds this
@@ -160,6 +162,57 @@ def shared_path_share(fixes: pd.DataFrame) -> dict[str, float]:
         d, _ = cKDTree(np.vstack(others)).query(pts)
         out[wid] = float(np.mean(d <= SHARED_RADIUS_M))
     return out
+
+
+def _true_at(g: pd.DataFrame, t: float) -> np.ndarray:
+    return np.array([np.interp(t, g["t_s"], g["x_m"]), np.interp(t, g["t_s"], g["y_m"])])
+
+
+def _device_joins(fixes: pd.DataFrame, walks: pd.DataFrame, poses: pd.DataFrame,
+                  radius: float) -> list[tuple[str, str]]:
+    """Consecutive recordings of one device (gap 0..LINK_GAP_S) whose true end and start lie within
+    ``radius`` metres (true positions clamped to the first/last waypoint)."""
+    span = poses.groupby(poses["walk_id"].astype(str))["t_s"].agg(["min", "max"])
+    fx = {str(w): g.sort_values("t_s") for w, g in fixes.groupby(fixes["walk_id"].astype(str))}
+    out = []
+    for _, g in walks.groupby("device_id"):
+        ids = sorted((w for w in g["walk_id"].astype(str) if w in span.index and w in fx),
+                     key=lambda w: span.loc[w, "min"])
+        for a, b in zip(ids, ids[1:]):
+            gap = span.loc[b, "min"] - span.loc[a, "max"]
+            near = np.linalg.norm(_true_at(fx[a], span.loc[a, "max"]) - _true_at(fx[b], span.loc[b, "min"]))
+            if 0 <= gap <= LINK_GAP_S and near <= radius:
+                out.append((a, b))
+    return out
+
+
+def linkable_walks(fixes: pd.DataFrame, walks: pd.DataFrame | None, poses: pd.DataFrame, radius: float) -> int:
+    """What evidence of about ``radius`` metres' range can link at most: the walks of the largest group of
+    the truth graph whose edges are walk pairs sharing ≥ LINK_SHARED_M of true path within ``radius``
+    (both ways), or a device's consecutive recordings that truly continue nearby (:func:`_device_joins`)."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    paths = {str(w): resample_path(g.sort_values("t_s")[["x_m", "y_m"]].to_numpy(float))
+             for w, g in fixes.groupby(fixes["walk_id"].astype(str), sort=False)}
+    ids = [w for w, p in paths.items() if len(p)]
+    if not ids:
+        return 0
+    index = {w: i for i, w in enumerate(ids)}
+    trees = {w: cKDTree(paths[w]) for w in ids}
+    adj = np.zeros((len(ids), len(ids)), bool)
+    for i, a in enumerate(ids):
+        for k in range(i + 1, len(ids)):
+            b = ids[k]
+            ab = (trees[b].query(paths[a])[0] <= radius).sum()
+            ba = (trees[a].query(paths[b])[0] <= radius).sum()
+            adj[i, k] = min(ab, ba) * PATH_STEP_M >= LINK_SHARED_M
+    if walks is not None and "device_id" in walks:
+        for a, b in _device_joins(fixes, walks, poses, radius):
+            if a in index and b in index:
+                adj[index[a], index[b]] = True
+    _, label = connected_components(adj, directed=False)
+    return int(np.bincount(label).max())
 
 
 # ---------------------------------------------------------------------------------------------- reading
@@ -334,13 +387,16 @@ def score_workspace(ws: Path) -> dict:
     rep, ev = read_report(ws, "optimize"), read_report(ws, "evaluate")
     walks, poses = read_table(ws, "optimize.walks"), need_table(ws, "optimize.poses")
     linked = linked_walks(walks, poses)
-    shared = shared_path_share(need_table(ws, "data.fixes"))
+    fixes = need_table(ws, "data.fixes")
+    shared = shared_path_share(fixes)
     wp = waypoint_errors(ws, linked)
     pw = per_walk_table(ws, wp, walks, shared, linked)
     n = len(pw)
     return {
         "walks": n,
         "shared_path_walks": int(sum(v >= 0.5 for v in shared.values())),
+        "linkable": {f"{r:g}m": linkable_walks(fixes, read_table(ws, "data.walks"), need_table(ws, "data.poses"), r)
+                     for r in LINK_RADII_M},
         "linked": int(pw["linked"].sum()), "linked_pct": round(100 * pw["linked"].mean(), 1) if n else None,
         "landmark_m": landmark_block(wp, pw, rep.get("gauge")),
         "report_landmark_m": {"raw": nested(rep, "raw", "landmark_error_m", "mean"),
@@ -383,13 +439,14 @@ def _f(v, fmt: str = "{:.1f}") -> str:
 
 def md_row(r: dict) -> str:
     if "skipped" in r or "error" in r:
-        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 9
+        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 10
     n, lm, rl, k = r["walks"], r["landmark_m"], r["report_landmark_m"], r["knn"]
     conf = r["confidence_rank"]
     st = r["stages"]
     cells = [
         r["floor"], str(n), f"{r['shared_path_walks']} ({100 * r['shared_path_walks'] / max(n, 1):.0f} %)",
         f"{r['linked']} ({r['linked_pct']:.0f} %)",
+        " / ".join(f"{v} ({100 * v / max(n, 1):.0f} %)" for v in r["linkable"].values()) if "linkable" in r else "–",
         f"{_f(nested(lm, 'raw', 'mean'))} → {_f(nested(lm, 'all_walks_unlinked_at_raw', 'mean'))}",
         f"{_f(rl['raw'])} → {_f(rl['optimized'])}",
         f"{_f(nested(lm, 'linked_walks', 'mean'))} / {_f(nested(lm, 'linked_walks', 'median'))}",
@@ -402,10 +459,10 @@ def md_row(r: dict) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
-HEADER = ("| floor | walks | walks sharing ≥ half their path (5 m) | linked | landmark error all walks, raw → "
-          "optimised (unlinked at raw) m | same, rmbuild's report m | linked walks mean / median m | linked walks "
-          "worse than raw (> 10 m) | kNN median built / surveyed m | confidence vs error ρ | time ingest / optimize / "
-          "export-map / evaluate s | peak MB |\n|" + "---|" * 12)
+HEADER = ("| floor | walks | walks sharing ≥ half their path (5 m) | linked | linkable by truth, 8 / 12 m | "
+          "landmark error all walks, raw → optimised (unlinked at raw) m | same, rmbuild's report m | "
+          "linked walks mean / median m | linked walks worse than raw (> 10 m) | kNN median built / surveyed m | "
+          "confidence vs error ρ | time ingest / optimize / export-map / evaluate s | peak MB |\n|" + "---|" * 13)
 
 NOTES = """
 - **Truth**: the surveyed waypoints (ILC `TYPE_WAYPOINT`, IPIN `POSI`), for scoring only. A walk's true path is
@@ -413,6 +470,11 @@ NOTES = """
   them (none outside the first..last waypoint).
 - **Shared path**: the true path resampled every 0.5 m; a walk counts when ≥ half its points lie within 5 m of
   another walk's resampled true path.
+- **Linkable** (from the truth: what evidence of a given range could link at most): the walks of the largest
+  group in which each walk is joined to another by ≥ 10 m of true path within 8 m (12 m) of it, both ways, or
+  by being the same device's next recording (gap ≤ 60 s) that truly starts within 8 m (12 m) of where the last
+  one ended. Wi-Fi vicinity (a band of ~6 m) links a walk outside the 8 m group only through weak, long-range
+  evidence; the 12 m group is a loose upper bound.
 - **Landmark error** (m, mean over waypoints): the walk's position at each waypoint time, linear between its
   poses, after **one** least-squares rigid SE(2) fit (Umeyama, no scale) for all walks together — as
   `rmbuild evaluate`/`optimize` score it. Raw: raw PDR poses, fit on all walks' waypoints. Optimised: the

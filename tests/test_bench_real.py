@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.bench_real import aligned_errors, at_fix_times, fit_se2, linked_walks, shared_path_share
+from bench.bench_real import aligned_errors, at_fix_times, fit_se2, linkable_walks, linked_walks, shared_path_share
 
 
 def test_fit_se2_recovers_a_rigid_transform_and_errors_vanish():
@@ -50,3 +50,24 @@ def test_linked_walks_reads_the_walk_table_then_the_poses_then_assumes_all():
     assert linked_walks(walks, poses) == {"b"}
     assert linked_walks(None, poses) == {"a"}
     assert linked_walks(walks.drop(columns="linked"), poses.drop(columns="linked")) == {"a", "b"}
+
+
+def test_linkable_walks_joins_by_shared_path_and_by_a_device_continuing_nearby():
+    t = np.arange(5.0)
+    fixes = pd.concat([
+        pd.DataFrame({"walk_id": "a", "t_s": t, "x_m": 10.0 * t, "y_m": 0.0}),
+        pd.DataFrame({"walk_id": "b", "t_s": t, "x_m": 10.0 * t, "y_m": 6.0}),  # 40 m within 8 m of a
+        pd.DataFrame({"walk_id": "c", "t_s": 100 + t, "x_m": 40.0, "y_m": 100.0 + 10 * t}),  # far from both
+        pd.DataFrame({"walk_id": "d", "t_s": 150 + t, "x_m": 40.0, "y_m": 143.0 + 10 * t}),  # starts 3 m on
+    ])
+    poses = fixes[["walk_id", "t_s"]]
+    assert linkable_walks(fixes, None, poses, 8.0) == 2  # a-b only
+    assert linkable_walks(fixes, None, poses, 5.0) == 1  # 6 m apart: not within 5 m
+    walks = pd.DataFrame({"walk_id": ["a", "b", "c", "d"], "device_id": ["p", "q", "r", "r"]})
+    assert linkable_walks(fixes, walks, poses, 8.0) == 2  # c-d joined too: two groups of two
+    walks["device_id"] = ["p", "r", "r", "r"]  # b ends at (40, 6), c starts 94 m away: no join
+    assert linkable_walks(fixes, walks, poses, 8.0) == 2
+    fixes.loc[fixes["walk_id"] == "c", "y_m"] -= 94.0  # c now starts at b's end (gap 96 s > 60 s): no join
+    assert linkable_walks(fixes, walks, poses, 8.0) == 2
+    fixes.loc[fixes["walk_id"] == "c", "t_s"] -= 50.0  # gap 46 s: b-c joined (c-d 97 m apart)
+    assert linkable_walks(fixes, walks, fixes[["walk_id", "t_s"]], 8.0) == 3
