@@ -12,7 +12,7 @@ from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
 from rmbuild.slam.evidence.base import EvidenceSource, Links, RotationPriors  # noqa: E402
 from rmbuild.slam.placement import fits, refine  # noqa: E402
-from rmbuild.slam.placement.grow import window_lengths  # noqa: E402
+from rmbuild.slam.placement.grow import SE2_MAX_COMPASS_DEV_RAD, _fit_both, window_lengths  # noqa: E402
 from rmbuild.slam.placement.merge import merge_components, orient_components  # noqa: E402
 from rmbuild.slam.placement.model import GrowState, Placement, WalkFit  # noqa: E402
 from rmbuild.slam.problem import covered_m  # noqa: E402
@@ -301,3 +301,25 @@ def test_a_walk_its_compass_misplaces_is_left_unlinked_not_placed_wrong():
     assert any("RF check" in m and "w001" in m for m in r.stats["warnings"])
     others = [f"w00{i}" for i in (0, 2, 3, 4)]
     assert trajectory_metrics(r.poses, ds, fit_walks=others)["landmark_error_fitted_walks_m"]["mean"] < 1.5
+
+
+def test_an_se2_fallback_that_contradicts_the_walks_compass_does_not_place_it():
+    """The compass-rotation fit fails; the SE(2) fit is accepted on its own figures. With a compass it places
+    the walk only when its rotation lies within SE2_MAX_COMPASS_DEV_RAD of the compass rotation."""
+    def fit_turned_by(dev: float):
+        def fit(rot: float | None) -> WalkFit:
+            if rot is not None:  # the compass-rotation fit: too few inliers
+                return WalkFit(np.array([0.0, 0.0, rot]), 2, 1, 5.0, 1, "translation", np.zeros(0, bool))
+            return WalkFit(np.array([3.0, 4.0, 0.5 + dev]), 9, 4, 30.0, 2, "se2", np.zeros(0, bool))
+        return fit
+
+    def accept(f: WalkFit | None, se2: bool) -> bool:
+        return f is not None and f.score >= 6
+    near, far = 0.8 * SE2_MAX_COMPASS_DEV_RAD, 1.2 * SE2_MAX_COMPASS_DEV_RAD
+    for dev, placed in ((near, True), (-near, True), (far, False), (-far, False), (np.pi, False)):
+        f, ok = _fit_both(fit_turned_by(dev), accept, 0.5)
+        assert ok is placed, dev
+        if ok:
+            assert f is not None and f.method == "se2" and np.isclose(f.t[2], 0.5 + dev)
+    f, ok = _fit_both(fit_turned_by(np.pi), accept, float("nan"))  # no compass: nothing to contradict
+    assert ok and f is not None and f.method == "se2"

@@ -37,6 +37,10 @@ KNN_BLOCK_ROWS = 2048
 # sigmas; a placed walk whose refined rotation is further than this from its compass rotation has an
 # unreliable compass: its heading priors are dropped
 HEADING_OUTLIER_SIGMAS = 4.0
+# rad; a walk with a compass whose compass-rotation fit failed is placed by an SE(2) fit only when the fitted
+# rotation lies this close to its compass: further off, the two contradict each other and the walk waits
+# (docs/optimize.md: IPIN -2 linked-walk error 9.5 -> 5.6 m, ILC F1 kNN 1.72 -> 1.64x; 20-30 deg alike)
+SE2_MAX_COMPASS_DEV_RAD = np.radians(30.0)
 
 
 def window_lengths(walks: WalkSet, cfg: PlacementConfig) -> np.ndarray:
@@ -72,14 +76,16 @@ Accept = Callable[[WalkFit | None, bool], bool]
 
 
 def _fit_both(fit: Fit, accept: Accept, prior_w: float) -> tuple[WalkFit | None, bool]:
-    """Translation fit with the compass rotation, else (or when it fails) an SE(2) fit."""
+    """Translation fit with the compass rotation, else (or when it fails) an SE(2) fit — with a compass, only
+    one whose rotation agrees with it (SE2_MAX_COMPASS_DEV_RAD)."""
     f, ok = None, False
     if np.isfinite(prior_w):
         f = fit(float(prior_w))
         ok = accept(f, False)
     if not ok:
         f2 = fit(None)
-        if accept(f2, True):
+        if accept(f2, True) and (not np.isfinite(prior_w) or f2 is None
+                                 or abs(geometry.wrap(f2.t[2] - prior_w)) <= SE2_MAX_COMPASS_DEV_RAD):
             f, ok = f2, True
     return f, ok
 
