@@ -63,13 +63,13 @@ def run(
 
 def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
          viewer: Viewer, incremental: bool = False) -> dict:
-    from rmbuild.slam import optimize
-
     t0 = time.perf_counter()
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
     if incremental:
         return _run_incremental(ws, ds, fp, cfg, anchors_path is not None, progress, viewer, t0)
+    from rmbuild.slam import optimize  # the full pipeline's modules: not imported by an incremental run
+
     anchors = None
     if anchors_path is not None:
         anchors = read_anchors(anchors_path)
