@@ -121,7 +121,8 @@ def test_the_incremental_path_imports_no_scipy() -> None:
 
     code = ("import sys, rmbuild.cli.optimize, rmbuild.stages.optimize, rmbuild.stages.incremental, "
             "rmbuild.slam.incremental; print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])  # this checkout's rmbuild first on the path
     assert out.stdout.strip() == "[]"
     import rmbuild.slam as slam
     from rmbuild.slam.pipeline import optimize
