@@ -35,8 +35,9 @@ ACCURACY_TOLERANCE = 0.05
 
 def cli(*args: str, tree: Path | None = None) -> tuple[float, float]:
     """Run ``rmbuild ARGS -q`` through the CLI (the code of ``tree`` first on the path when given); its
-    (wall time, CPU time: user + system) in s. The CPU time hardly moves with the load of other processes
-    on a shared machine; the wall time does. Raises on failure."""
+    (wall time, CPU time: user + system) in s. The CPU time moves less with the load of other processes on a
+    shared machine than the wall time, but it does: multi-threaded matrix products (the full run's) spend
+    more CPU under contention. Raises on failure."""
     env = {**os.environ, "MPLBACKEND": "Agg"}
     if tree is not None:
         env["PYTHONPATH"] = str(tree)
@@ -172,8 +173,8 @@ def markdown(result: dict) -> str:
              f"The last {result['share_new']:.0%} of a floor's traces appended (`ingest --append`) to a workspace "
              "optimised on the rest; the same workspace then optimised incrementally and in full, each command "
              "timed in turn (the fastest of the repeats kept). Wall: the command's wall time; CPU: its user + "
-             "system time (hardly moved by other processes on a shared machine); core: the optimisation "
-             "itself (the report's time_s.total). Landmark error: optimize's report against the waypoints "
+             "system time (less moved by other processes on a shared machine than the wall time); core: the "
+             "optimisation itself (the report's time_s.total). Landmark error: optimize's report against the waypoints "
              "(mean, m; all walks / linked walks only); kNN: `evaluate --localizer knn`, median error (m) on "
              "the built map. Targets: "
              f"≥ {result['speedup_target']:g}× faster, accuracy within {result['accuracy_tolerance']:.0%}."
@@ -198,6 +199,11 @@ def markdown(result: dict) -> str:
                 f"{_f(f['landmark_error_linked_m'])} / {_f(i['landmark_error_linked_m'])} | "
                 f"{_f(f['knn_median_m'])} / {_f(i['knn_median_m'])} | {f['linked_walks']} / {i['linked_walks']} "
                 f"({i['new_walks_placed']} of {r['walks_new']}) |")
+    loads = [x for r in result["floors"].values() for run in r.get("runs", {}).values()
+             for x in run.get("load_average_before", [])]
+    if loads:
+        lines += ["", f"Load average (1 min, {result.get('machine', {}).get('cpus', '?')} CPUs) before the timed "
+                  f"commands: {min(loads):.1f}-{max(loads):.1f}."]
     return "\n".join(lines) + "\n"
 
 

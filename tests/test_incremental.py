@@ -113,6 +113,26 @@ def test_incremental_refuses_a_solution_of_other_walks(venue: dict) -> None:
 
 
 # ---------------------------------------------------------------------------------------- localize GeoJSON
+def test_the_incremental_path_imports_no_scipy() -> None:
+    """The command's modules load without scipy (~0.3 s at import; only the full pipeline needs it), and the
+    package's lazy exports still resolve."""
+    import subprocess
+    import sys
+
+    code = ("import sys, rmbuild.cli.optimize, rmbuild.stages.optimize, rmbuild.stages.incremental, "
+            "rmbuild.slam.incremental; print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])  # this checkout's rmbuild first on the path
+    assert out.stdout.strip() == "[]"
+    import rmbuild.slam as slam
+    from rmbuild.slam.pipeline import optimize
+    from rmbuild.slam.result import OptimizeResult
+
+    assert slam.optimize is optimize and slam.OptimizeResult is OptimizeResult
+    with pytest.raises(AttributeError):
+        _ = slam.no_such_name
+
+
 def test_geojson_features_carry_lonlat_and_the_scan_properties() -> None:
     from rmbuild.floorplan import Georef
     from rmbuild.stages.localize_geojson import feature_collection

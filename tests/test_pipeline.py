@@ -263,3 +263,15 @@ def test_optimize_with_anchors_file(tiny_ws: Path, tmp_path: Path, capsys) -> No
     # the tiny venue's walks land within a metre or two of the truth (median 0.5 m, rmse 1.1 m)
     assert rep["gauge"] == "anchors" and rep["optimized"]["ate_m"]["median"] < 1.0, rep["optimized"]["ate_m"]
     assert len(Workspace.open(tmp_path / "ws").read_table("optimize.anchors")) == len(ends)
+
+
+def test_tum_text_is_one_line_per_pose_with_six_decimals() -> None:
+    """t x y z qx qy qz qw per pose, each "%.6f" (as f"{v:.6f}"): planar, so z = qx = qy = 0 and the
+    quaternion is the heading's half-angle."""
+    from rmbuild.stages.optimize import tum_text
+
+    poses = pd.DataFrame({"t_s": [1.5, 1234567.0000004], "x_m": [-0.0, 2.25], "y_m": [1e-7, -3.0],
+                          "heading_rad": [0.0, np.pi]})
+    assert tum_text(poses) == ("1.500000 -0.000000 0.000000 0.000000 0.000000 0.000000 0.000000 1.000000\n"
+                               "1234567.000000 2.250000 -3.000000 0.000000 0.000000 0.000000 1.000000 0.000000\n")
+    assert tum_text(poses.iloc[:0]) == ""

@@ -45,13 +45,13 @@ from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, CompassSource
 from rmbuild.slam.evidence.continuity import JOIN_CAUCHY_K, ContinuitySource
 from rmbuild.slam.factors import X, fuzzy_error, poses_to_values, values_to_poses, vicinity_factor, vicinity_noise
 from rmbuild.slam.pairs import RowMeta, window_median
-from rmbuild.slam.pipeline import OptimizeResult
 from rmbuild.slam.placement.edges import RANSAC_SEED
 from rmbuild.slam.placement.grow import MAX_ROUNDS, GrowthEvidence, PairEvidence, ScanEvidence
 from rmbuild.slam.placement.link import link_components
 from rmbuild.slam.placement.merge import _merge_one as merge_onto
 from rmbuild.slam.placement.model import GrowState
 from rmbuild.slam.problem import WalkSet
+from rmbuild.slam.result import OptimizeResult
 from rmbuild.slam.rfmodel import RFModel, calibrate
 from rmbuild.slam.rss import RssMatrix
 from rmbuild.slam.solve import KEYFRAME_MAX_GAP, levenberg_marquardt

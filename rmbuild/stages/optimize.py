@@ -16,12 +16,10 @@ from rmbuild.config import OptimizeConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.evaluate.trajectory import trajectory_metrics
 from rmbuild.floorplan import FloorPlan, from_local_geojson
-from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.floorplan import check_plan_frame
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
-from rmbuild.stages.view import log_workspace
 from rmbuild.viz.viewer import Viewer, ensure_viewer
 
 log = logging.getLogger(__name__)
@@ -34,7 +32,8 @@ def tum_text(poses: pd.DataFrame) -> str:
         poses["t_s"], poses["x_m"], poses["y_m"], np.zeros(len(th)),
         np.zeros(len(th)), np.zeros(len(th)), np.sin(th / 2), np.cos(th / 2),
     ])
-    return "".join(" ".join(f"{v:.6f}" for v in r) + "\n" for r in rows)
+    line = " ".join(["%.6f"] * rows.shape[1]) + "\n"  # the same text as f"{v:.6f}" per value, ~2x faster
+    return "".join(line % tuple(r) for r in rows.tolist())
 
 
 def run(
@@ -63,15 +62,17 @@ def run(
 
 def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
          viewer: Viewer, incremental: bool = False) -> dict:
-    from rmbuild.slam import optimize
-
     t0 = time.perf_counter()
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
     if incremental:
         return _run_incremental(ws, ds, fp, cfg, anchors_path is not None, progress, viewer, t0)
+    from rmbuild.slam import optimize  # the full pipeline's modules: not imported by an incremental run
+
     anchors = None
     if anchors_path is not None:
+        from rmbuild.io.anchors import check_anchors, read_anchors
+
         anchors = read_anchors(anchors_path)
         check_anchors(anchors, ds, cfg.anchors.max_gap_s)
     ws.check_can_write("optimize", force)
@@ -150,7 +151,10 @@ def _write(ws: Workspace, ds, cfg: OptimizeConfig, result, gauge: str, anchor_ta
         w.config(to_toml(cfg, "optimize"))
         report["time_s"]["stage_total"] = round(time.perf_counter() - t0, 3)
         w.report = report
-    log_workspace(ws, viewer)
+    if viewer.enabled:  # rmbuild.stages.view is imported only when viewing
+        from rmbuild.stages.view import log_workspace
+
+        log_workspace(ws, viewer)
     return report
 
 

@@ -12,8 +12,6 @@ factor for a node pair seen through two walk frames.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 
 from rmbuild import geometry
 from rmbuild.slam.problem import WalkSet
@@ -40,6 +38,9 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
     ``rot_prior`` (n_walks,) rad, NaN where none; the reference walk's position is fixed, its rotation too
     unless it has a rotation prior. Returns new T.
     """
+    import scipy.sparse as sp  # imported here: ~0.3 s at import, which `optimize --incremental` (no refinement) skips
+    from scipy.sparse.linalg import spsolve
+
     T = T.copy()
     act = np.flatnonzero(active)
     if len(act) < 2 and not np.isfinite(rot_prior[ref]):
@@ -80,6 +81,8 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
 
 def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
     """(J, whitened residuals, Cauchy weights) of the links' position differences."""
+    import scipy.sparse as sp
+
     pa = walks.world_xy(T, nk)
     pb = walks.world_xy(T, nq)
     r = (pa - pb) / PAIR_SIGMA_M
