@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rmbuild.slam.pairs import BLOCK_ELEMS
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.rfmodel import NEAR_M
 
@@ -96,14 +97,25 @@ class OverlapCheck:
         """Per walk, how much further (dB) its scans' best matches in other walks are than the data set's
         typical walk's: a phone with another gain looks far from everything, wherever it is placed."""
         best = np.full(self.walks.n_walks, np.nan)
+        dmin = self._best_other_walk_match()
         for w, rw in enumerate(self.rows_of):
-            others = np.flatnonzero(self.row_walk != w)
-            if len(rw) and len(others):
-                d, common = self.sim.rss.block(rw, others)
-                dmin = np.where(common >= self.sim.min_common, d, np.inf).min(axis=1)
-                best[w] = float(np.median(dmin)) if np.isfinite(dmin).any() else np.nan
+            if len(rw) and (self.row_walk != w).any():
+                best[w] = float(np.median(dmin[rw])) if np.isfinite(dmin[rw]).any() else np.nan
         off = best - np.nanmedian(best) if np.isfinite(best).any() else best
         return np.where(np.isfinite(off), np.maximum(off, 0.0), 0.0)
+
+    def _best_other_walk_match(self) -> np.ndarray:
+        """Per fingerprint row, the RSS distance (dB) of its most similar row of another walk (sharing
+        ``min_common`` APs; inf if none), in blocks of rows against all rows at once."""
+        n = len(self.row_walk)
+        out = np.full(n, np.inf)
+        step = max(1, BLOCK_ELEMS // max(n, 1))
+        for lo in range(0, n, step):
+            rows = np.arange(lo, min(lo + step, n))
+            d, common = self.sim.rss.block(rows, slice(None))
+            ok = (common >= self.sim.min_common) & (self.row_walk[rows][:, None] != self.row_walk[None, :])
+            out[rows] = np.where(ok, d, np.inf).min(axis=1)
+        return out
 
     def evidence(self, w: int, xy: np.ndarray, placed_rows: np.ndarray, placed_xy: np.ndarray) -> OverlapEvidence:
         """Walk ``w`` with its scans at ``xy`` (rows ``rows_of[w]``) against the placed scans ``placed_rows`` at
