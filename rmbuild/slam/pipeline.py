@@ -97,9 +97,11 @@ def optimize(
     final_xyt = init_xyt.copy() if checks.rejected else outcome.poses
     timing["checks"] = time.perf_counter() - t0
 
+    t0 = time.perf_counter()
     if cfg.placement.method == "grow":  # the RF check (placement/rfcheck.py) on the solved poses
         sim = wifi.scan_locator()
         placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2])
+    timing["rf_check"] = time.perf_counter() - t0
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
     line = report.unlinked_warning(walks, walks_df, placement.reference)
