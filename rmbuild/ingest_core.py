@@ -120,9 +120,8 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
     if not np.isfinite(wifi["t_s"].to_numpy(dtype=np.float64)).all():
         raise InputError("wifi: t_s is NaN or infinite", ww(_first(~np.isfinite(wifi["t_s"].to_numpy()))))
     wifi_codes, wifi_walk_ids = _check_time_order(wifi, ww, strict=False, what="wifi")
-    dup = wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
-    if dup.any():
-        i = _first(dup)
+    i = _first_repeated_reading(wifi, wifi_codes)
+    if i >= 0:
         raise InputError(
             f"duplicate reading (walk {_v(wifi['walk_id'].iloc[i])}, t_s={_v(wifi['t_s'].iloc[i])}, "
             f"bssid {_v(wifi['bssid'].iloc[i])})",
@@ -151,6 +150,24 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         wid = sorted(missing)[0]
         raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
                          wp(_first((poses["walk_id"] == wid).to_numpy())))
+
+
+def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
+    """The first row repeating an earlier row's (walk, t_s, bssid), -1 when none (as ``DataFrame.duplicated``).
+    Rows ordered by walk and time (the usual file) are keyed by scan run and BSSID code: no hashing of text
+    pairs."""
+    t = wifi["t_s"].to_numpy(dtype=np.float64)
+    dw, dt = np.diff(walk_codes), np.diff(t)
+    if (dw >= 0).all() and ((dw > 0) | (dt >= 0)).all():
+        scan = np.cumsum(np.r_[0, (dw != 0) | (dt != 0)])  # equal (walk, time) rows are one run here
+        b, uniq = pd.factorize(wifi["bssid"], use_na_sentinel=False)
+        key = scan * max(len(uniq), 1) + b
+        if not (np.diff(np.sort(key)) == 0).any():  # a sort finds that there is none (the usual case)
+            return -1
+        dup = pd.Series(key).duplicated().to_numpy()
+    else:
+        dup = wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
+    return _first(dup) if dup.any() else -1
 
 
 def attach(poses: pd.DataFrame, pose_walk: np.ndarray, wifi: pd.DataFrame, wifi_walk: np.ndarray,
