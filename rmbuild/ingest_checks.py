@@ -16,6 +16,8 @@ Pure: takes a :class:`Dataset`, returns the warnings.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pandas as pd
 
@@ -127,18 +129,20 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     walk_codes, walk_uniq = pd.factorize(wc_all[keep])
     walk_names = names_all[walk_uniq]
     by_scan, start, scan_walk, top = _scan_groups(scan, rssi, ap, walk_codes)
+    n_ap = int(ap.max()) + 1
     rng = np.random.default_rng(seed)
     found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for members in sorted(top, key=len, reverse=True)[:MAX_GROUPS]:
         m = np.asarray(members)
-        if len(np.unique(scan_walk[m])) < 2:
+        w = scan_walk[m]
+        if (w == w[0]).all():
             continue
         if len(m) > MAX_GROUP_SCANS:
             m = rng.choice(m, MAX_GROUP_SCANS, replace=False)
         n = start[m + 1] - start[m]
         member = np.repeat(np.arange(len(m)), n)
         rows = by_scan[np.repeat(start[m] - np.cumsum(n) + n, n) + np.arange(n.sum())]
-        found.append(_group_pairs(m, member, ap[rows], rssi[rows], scan_walk))
+        found.append(_group_pairs(m, member, ap[rows], rssi[rows], scan_walk, n_ap))
     if not found:
         return {}
     wi, wj, med = (np.concatenate(x) for x in zip(*found, strict=True))
@@ -182,22 +186,26 @@ def scan_ids(walk_codes: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def _sorted_row_median(srt: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Median of each row of ``srt`` (rows sorted, their ``n`` finite values first)."""
-    lo = np.take_along_axis(srt, ((n - 1) // 2)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(srt, (n // 2)[:, None], axis=1)[:, 0]
-    return 0.5 * (lo + hi)
+    r = np.arange(len(srt))
+    return 0.5 * (srt[r, (n - 1) // 2] + srt[r, n // 2])
 
 
-def _group_pairs(members: np.ndarray, row: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@functools.cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, kept (groups have at most MAX_GROUP_SCANS members)."""
+    return np.triu_indices(n, 1)
+
+
+def _group_pairs(members: np.ndarray, row: np.ndarray, ap: np.ndarray, rssi: np.ndarray, scan_walk: np.ndarray,
+                 n_ap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The co-located scan pairs of one group (``row``: the member index of each of the members' readings
-    ``ap``, ``rssi``): the two walks and the median difference of each pair."""
-    _, cols = np.unique(ap, return_inverse=True)
-    shared_col = np.bincount(cols) >= 2  # an AP only one scan heard is never shared: no column for it
-    twice = shared_col[cols]
+    ``ap``, codes below ``n_ap``, ``rssi``): the two walks and the median difference of each pair."""
+    shared_col = np.bincount(ap, minlength=n_ap) >= 2  # an AP only one scan heard is never shared: no column
+    twice = shared_col[ap]
     mat = np.full((len(members), int(shared_col.sum())), np.nan)
-    mat[row[twice], (np.cumsum(shared_col) - 1)[cols[twice]]] = rssi[twice]
+    mat[row[twice], (np.cumsum(shared_col) - 1)[ap[twice]]] = rssi[twice]
     walks = scan_walk[members]
-    iu, ju = np.triu_indices(len(members), 1)
+    iu, ju = _pairs(len(members))
     seen = np.isfinite(mat).astype(np.float32)  # counts < 2^24: exact in float32
     shared = (seen @ seen.T)[iu, ju]
     ok = (walks[iu] != walks[ju]) & (shared >= MIN_SHARED_APS)
