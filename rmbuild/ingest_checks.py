@@ -125,8 +125,8 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
         return {}
     scan = scan[keep]
     rssi = wifi["rssi_dbm"].to_numpy(np.float64)[keep]
-    ap = pd.factorize(pd.factorize(wifi["bssid"])[0][keep])[0]  # codes in order of first appearance
-    walk_codes, walk_uniq = pd.factorize(wc_all[keep])
+    ap, _ = _first_appearance(pd.factorize(wifi["bssid"])[0][keep])
+    walk_codes, walk_uniq = _first_appearance(wc_all[keep])
     walk_names = names_all[walk_uniq]
     by_scan, start, scan_walk, top = _scan_groups(scan, rssi, ap, walk_codes)
     n_ap = int(ap.max()) + 1
@@ -153,6 +153,15 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
     cuts = np.searchsorted(walk, np.arange(len(walk_names) + 1))
     return {str(walk_names[w]): float(np.median(diff[cuts[w]:cuts[w + 1]]))
             for w in range(len(walk_names)) if cuts[w + 1] - cuts[w] >= MIN_PAIRS}
+
+
+def _first_appearance(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``pd.factorize`` of non-negative integer codes (numbered again in order of first appearance); codes
+    already so numbered (all but a few readings kept: the usual case) are returned as they are."""
+    top = np.maximum.accumulate(codes)
+    if len(codes) and codes[0] == 0 and (codes[1:] <= top[:-1] + 1).all():
+        return codes, np.arange(int(top[-1]) + 1)
+    return pd.factorize(codes)
 
 
 def _scan_groups(scan: np.ndarray, rssi: np.ndarray, ap: np.ndarray, walk_codes: np.ndarray

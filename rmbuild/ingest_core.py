@@ -93,8 +93,9 @@ def _merge_duplicate_readings(raw: RawInput) -> None:
     raw.notes.append(f"merged {int(dup.sum()):,} Wi-Fi readings repeating a BSSID within one scan (first kept)")
 
 
-def validate(raw: RawInput, cfg: IngestConfig) -> None:
-    """Checks shared by every format (types and columns were checked by the reader)."""
+def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd.Index]]:
+    """Checks shared by every format (types and columns were checked by the reader). Returns the walk codes
+    and walk ids of ``raw.poses`` and ``raw.wifi`` rows (``pd.factorize``), for the ordering that follows."""
     if raw.merge_duplicate_readings:
         _merge_duplicate_readings(raw)
     poses, wifi, fixes = raw.poses, raw.wifi, raw.fixes
@@ -108,7 +109,7 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         v = poses[c].to_numpy(dtype=np.float64)
         if not np.isfinite(v).all():
             raise InputError(f"poses: {c} is NaN or infinite", wp(_first(~np.isfinite(v))))
-    _, pose_walk_ids = _check_time_order(poses, wp, strict=True, what="poses")
+    pose_codes, pose_walk_ids = _check_time_order(poses, wp, strict=True, what="poses")
 
     rssi = wifi["rssi_dbm"].to_numpy(dtype=np.float64)
     bad = ~np.isfinite(rssi) | (rssi < cfg.rssi_min_dbm) | (rssi > cfg.rssi_max_dbm)
@@ -150,6 +151,7 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         wid = sorted(missing)[0]
         raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
                          wp(_first((poses["walk_id"] == wid).to_numpy())))
+    return {"poses": (pose_codes, pose_walk_ids), "wifi": (wifi_codes, wifi_walk_ids)}
 
 
 def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
@@ -349,7 +351,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     of each walk with raw IMU (progress).
     """
     reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig(), on_walk)
-    validate(raw, cfg)
+    codes = validate(raw, cfg)
     walks = raw.walks.copy()
     for c in WALK_COLUMNS:
         if c not in walks.columns:
@@ -362,7 +364,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     walks = walks[has_poses].reset_index(drop=True)
     walk_index = pd.Index(walks["walk_id"])
 
-    poses, pose_walk = _order_by_walk(raw.poses, walk_index)
+    poses, pose_walk = _order_by_walk(raw.poses, walk_index, codes["poses"])
     new_walk = np.r_[True, pose_walk[1:] != pose_walk[:-1]]
     row = np.arange(len(poses))
     poses["step"] = row - np.maximum.accumulate(np.where(new_walk, row, 0))  # the row's number in its walk
@@ -377,7 +379,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
         wifi = wifi.assign(freq_mhz=np.nan)
     if "ssid" not in wifi.columns:
         wifi = wifi.assign(ssid="")
-    wifi, wifi_walk = _order_by_walk(wifi, walk_index)
+    wifi, wifi_walk = _order_by_walk(wifi, walk_index, codes["wifi"])
     wifi["node"] = attach(poses, pose_walk, wifi, wifi_walk, cfg)
     all_readings = wifi   # for the PDR's Wi-Fi check: a walk without steps keeps no readings attached
     attached = wifi["node"].to_numpy() >= 0
@@ -439,23 +441,18 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     return ds, fp, summary
 
 
-def _order_by_walk(df: pd.DataFrame, walk_index: pd.Index) -> tuple[pd.DataFrame, np.ndarray]:
-    """``df`` (rows of the walks of ``walk_index``) ordered by walk, in the index's order, then by time (file
-    order among equal keys), with a RangeIndex; and each row's walk (its position in ``walk_index``)."""
-    w = _positions(walk_index, df["walk_id"])
+def _order_by_walk(df: pd.DataFrame, walk_index: pd.Index, codes: tuple[np.ndarray, pd.Index]
+                   ) -> tuple[pd.DataFrame, np.ndarray]:
+    """``df`` (rows of the walks of ``walk_index``; ``codes``: its rows' ``pd.factorize`` of walk_id) ordered by
+    walk, in the index's order, then by time (file order among equal keys), with a RangeIndex; and each row's
+    walk (its position in ``walk_index``)."""
+    w = walk_index.get_indexer(codes[1])[codes[0]]
     t = df["t_s"].to_numpy(dtype=np.float64)
     dw = np.diff(w)
     if (dw >= 0).all() and ((dw > 0) | (np.diff(t) >= 0)).all():  # ordered already (the usual input)
         return df.reset_index(drop=True), w
     order = np.lexsort((t, w))
     return df.take(order).reset_index(drop=True), w[order]
-
-
-def _positions(index: pd.Index, values: pd.Series) -> np.ndarray:
-    """``index.get_indexer(values)`` through the distinct values (a few walks, many rows: several times faster
-    than looking every row up)."""
-    codes, uniq = pd.factorize(values)
-    return index.get_indexer(uniq)[codes]
 
 
 def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_gap_s: float) -> pd.DataFrame:
