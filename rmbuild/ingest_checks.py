@@ -17,6 +17,7 @@ Pure: takes a :class:`Dataset`, returns the warnings.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -42,54 +43,79 @@ MAX_GROUP_SCANS = 40
 MAX_GROUPS = 300
 
 
+@dataclass(frozen=True)
+class _Codes:
+    """``pd.factorize`` of a dataset's id columns, computed once for all the checks."""
+
+    pose_walk: tuple[np.ndarray, pd.Index]
+    wifi_walk: tuple[np.ndarray, pd.Index]
+    bssid: np.ndarray
+
+    @staticmethod
+    def of(ds: Dataset) -> _Codes:
+        pw, pn = pd.factorize(ds.poses["walk_id"])
+        ww, wn = pd.factorize(ds.wifi["walk_id"])
+        return _Codes((pw, pd.Index(pn)), (ww, pd.Index(wn)), pd.factorize(ds.wifi["bssid"])[0])
+
+
 def evidence_warnings(ds: Dataset) -> list[str]:
     """Warnings about duplicated walks, very short walks and device offsets (empty when all is plausible)."""
-    return duplicate_walks(ds) + short_walks(ds) + [
+    codes = _Codes.of(ds)
+    return duplicate_walks(ds, codes) + short_walks(ds, codes) + [
         f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
         "vicinity factors compare raw RSS, so it may stay unlinked; the slac localizer calibrates devices "
         "when localizing"
-        for w, off in walk_rss_offsets(ds).items() if abs(off) >= OFFSET_WARN_DB
+        for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB
     ]
 
 
-def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series) -> dict[str, tuple[int, int, int]]:
-    """Per walk (in order of first appearance), an order-independent digest of its rows (times relative to
-    the walk's first pose, values rounded): equal digests mean equal rows."""
-    codes, names = pd.factorize(df["walk_id"])
+def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series, walk: tuple[np.ndarray, pd.Index],
+                  text: dict[str, np.ndarray]) -> dict[str, tuple[int, int, int]]:
+    """Per walk (in order of first appearance; ``walk``: the rows' walk codes and the walk ids, which may
+    name walks without rows), an order-independent digest of its rows (times relative to the walk's first
+    pose, values rounded): equal digests mean equal rows. ``text``: codes of text columns."""
+    codes, names = walk
     start = t0.reindex(names).to_numpy(float)  # NaN for a walk without poses
     rel = {}  # the walk id itself is not hashed: a copy has another one
     for c in cols:
         s = df[c]
         if c == "t_s":
             rel[c] = np.round(s.to_numpy(float) - start[codes], 3)
+        elif c in text:
+            rel[c] = text[c]  # equal text, equal code: hashing codes is hashing the text here
         elif pd.api.types.is_float_dtype(s):
             rel[c] = np.round(s.to_numpy(float), 3)
         elif not pd.api.types.is_numeric_dtype(s):
-            rel[c] = pd.factorize(s)[0]  # equal text, equal code: hashing codes is hashing the text here
+            rel[c] = pd.factorize(s)[0]
         else:
             rel[c] = s.to_numpy()
     h = pd.util.hash_pandas_object(pd.DataFrame(rel), index=False).to_numpy()
     order = np.argsort(codes, kind="stable")
-    cuts = np.searchsorted(codes[order], np.arange(len(names)))
+    present = np.flatnonzero(np.bincount(codes, minlength=len(names)))
+    cuts = np.searchsorted(codes[order], present)
     h = h[order]
     # wrapping sum and xor of 64-bit row hashes, and the row count: a multiset digest
     sums = np.add.reduceat(h, cuts) if len(h) else h
     xors = np.bitwise_xor.reduceat(h, cuts) if len(h) else h
     sizes = np.diff(np.r_[cuts, len(h)])
-    return {str(w): (int(a), int(b), int(n)) for w, a, b, n in zip(names, sums, xors, sizes, strict=True)}
+    return {str(w): (int(a), int(b), int(n)) for w, a, b, n in zip(names[present], sums, xors, sizes, strict=True)}
 
 
-def duplicate_walks(ds: Dataset) -> list[str]:
+def duplicate_walks(ds: Dataset, codes: _Codes | None = None) -> list[str]:
     """Walks whose steps (relative times and own-frame poses) or scans (relative times, BSSIDs, RSSI)
     repeat another walk's."""
-    codes, names = pd.factorize(ds.poses["walk_id"])
-    n = np.bincount(codes, minlength=len(names))
+    codes = codes or _Codes.of(ds)
+    pw, names = codes.pose_walk
+    n = np.bincount(pw, minlength=len(names))
     t = ds.poses["t_s"].to_numpy(float)
-    first_row = np.full(len(names), len(codes))
-    np.minimum.at(first_row, codes, np.arange(len(codes)))
-    t0 = pd.Series(t[first_row] if len(codes) else np.zeros(0), index=names)  # each walk's first time, file order
-    digests = {"steps": _walk_digests(ds.poses[n[codes] >= 2], ["t_s", "x_m", "y_m", "heading_rad"], t0),
-               "scans": _walk_digests(ds.wifi, ["t_s", "bssid", "rssi_dbm"], t0)}
+    first_row = np.full(len(names), len(pw))
+    np.minimum.at(first_row, pw, np.arange(len(pw)))
+    t0 = pd.Series(t[first_row] if len(pw) else np.zeros(0), index=names)  # each walk's first time, file order
+    steps = n[pw] >= 2
+    digests = {"steps": _walk_digests(ds.poses[steps], ["t_s", "x_m", "y_m", "heading_rad"], t0,
+                                      (pw[steps], names), {}),
+               "scans": _walk_digests(ds.wifi, ["t_s", "bssid", "rssi_dbm"], t0, codes.wifi_walk,
+                                      {"bssid": codes.bssid})}
     out: list[str] = []
     reported: set[str] = set()
     for what, d in digests.items():
@@ -103,20 +129,22 @@ def duplicate_walks(ds: Dataset) -> list[str]:
     return out
 
 
-def short_walks(ds: Dataset) -> list[str]:
-    n = ds.poses.groupby("walk_id", sort=False).size()
-    short = n[(n >= 2) & (n < MIN_WALK_STEPS)]
+def short_walks(ds: Dataset, codes: _Codes | None = None) -> list[str]:
+    pw, names = (codes or _Codes.of(ds)).pose_walk
+    n = np.bincount(pw, minlength=len(names))  # walks in order of first appearance
+    short = names[(n >= 2) & (n < MIN_WALK_STEPS)]
     if not len(short):
         return []
     return [f"{len(short)} walk(s) with fewer than {MIN_WALK_STEPS} steps, too short to link by Wi-Fi: "
-            f"{[str(w) for w in short.index[:5]]}"]
+            f"{[str(w) for w in short[:5]]}"]
 
 
-def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
+def walk_rss_offsets(ds: Dataset, seed: int = 0, codes: _Codes | None = None) -> dict[str, float]:
     """Each walk's median RSS difference (dB) to the other walks' co-located scans (walks with too few
     co-located pairs are left out)."""
     wifi = ds.wifi
-    wc_all, names_all = pd.factorize(wifi["walk_id"])
+    codes = codes or _Codes.of(ds)
+    wc_all, names_all = codes.wifi_walk
     if wc_all.max(initial=-1) < 2:
         return {}
     scan = scan_ids(wc_all, wifi["t_s"].to_numpy(np.float64))
@@ -125,7 +153,7 @@ def walk_rss_offsets(ds: Dataset, seed: int = 0) -> dict[str, float]:
         return {}
     scan = scan[keep]
     rssi = wifi["rssi_dbm"].to_numpy(np.float64)[keep]
-    ap, _ = _first_appearance(pd.factorize(wifi["bssid"])[0][keep])
+    ap, _ = _first_appearance(codes.bssid[keep])
     walk_codes, walk_uniq = _first_appearance(wc_all[keep])
     walk_names = names_all[walk_uniq]
     by_scan, start, scan_walk, top = _scan_groups(scan, rssi, ap, walk_codes)
