@@ -56,6 +56,8 @@ def _month_scaling(d: dict) -> str:
 ROWS: list[Row] = [
     Row("ingest", "ingest `large` / bare `pandas.read_csv` of the same files", lambda d: d["ratio_ingest_to_read_csv"],
         "×", "≤ 3", lambda v: v <= 3.0),
+    Row("ingest", "ingest `large` / bare `pandas.read_csv`, CPU time (read_csv parses on several threads)",
+        lambda d: f"{d['ratio_cpu_ingest_to_read_csv']:.2f}× at load {d['machine'].get('load_1min', '?')}", ""),
     Row("ingest", "ingest `large` readings per second", lambda d: d["ingest_readings_per_s"], "/s"),
     Row("map", "kNN batch vs scikit-learn brute force (8,625 RPs × 186 APs, K = 15), CPU time, one thread each",
         lambda d: d["knn"]["one_thread_cpu"]["speedup_batch"], "×", "≥ 3", lambda v: v >= 3.0),

@@ -56,9 +56,11 @@ def _v(x: object) -> str:
     return repr(x.item() if isinstance(x, np.generic) else x)
 
 
-def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: bool, what: str) -> None:
-    """Times must not go backwards within a walk (strictly increase when ``strict``), in file order."""
-    codes, names = pd.factorize(df["walk_id"])
+def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: bool, what: str
+                      ) -> tuple[np.ndarray, pd.Index]:
+    """Times must not go backwards within a walk (strictly increase when ``strict``), in file order.
+    Returns the walk codes of the rows and the walk ids (``pd.factorize``, a missing id counting as one)."""
+    codes, names = pd.factorize(df["walk_id"], use_na_sentinel=False)
     t = df["t_s"].to_numpy(dtype=np.float64)
     # previous row of the same walk, in file order
     order = np.argsort(codes, kind="stable")
@@ -75,6 +77,7 @@ def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: boo
         raise InputError(
             f"{what}: time goes backwards in walk {_v(wid)} ({_v(ts[k])} -> {_v(ts[k + 1])})", where(row)
         )
+    return codes, pd.Index(names)
 
 
 def _merge_duplicate_readings(raw: RawInput) -> None:
@@ -90,8 +93,9 @@ def _merge_duplicate_readings(raw: RawInput) -> None:
     raw.notes.append(f"merged {int(dup.sum()):,} Wi-Fi readings repeating a BSSID within one scan (first kept)")
 
 
-def validate(raw: RawInput, cfg: IngestConfig) -> None:
-    """Checks shared by every format (types and columns were checked by the reader)."""
+def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd.Index]]:
+    """Checks shared by every format (types and columns were checked by the reader). Returns the walk codes
+    and walk ids of ``raw.poses`` and ``raw.wifi`` rows (``pd.factorize``), for the ordering that follows."""
     if raw.merge_duplicate_readings:
         _merge_duplicate_readings(raw)
     poses, wifi, fixes = raw.poses, raw.wifi, raw.fixes
@@ -105,7 +109,7 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         v = poses[c].to_numpy(dtype=np.float64)
         if not np.isfinite(v).all():
             raise InputError(f"poses: {c} is NaN or infinite", wp(_first(~np.isfinite(v))))
-    _check_time_order(poses, wp, strict=True, what="poses")
+    pose_codes, pose_walk_ids = _check_time_order(poses, wp, strict=True, what="poses")
 
     rssi = wifi["rssi_dbm"].to_numpy(dtype=np.float64)
     bad = ~np.isfinite(rssi) | (rssi < cfg.rssi_min_dbm) | (rssi > cfg.rssi_max_dbm)
@@ -116,17 +120,16 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         )
     if not np.isfinite(wifi["t_s"].to_numpy(dtype=np.float64)).all():
         raise InputError("wifi: t_s is NaN or infinite", ww(_first(~np.isfinite(wifi["t_s"].to_numpy()))))
-    _check_time_order(wifi, ww, strict=False, what="wifi")
-    dup = wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
-    if dup.any():
-        i = _first(dup)
+    wifi_codes, wifi_walk_ids = _check_time_order(wifi, ww, strict=False, what="wifi")
+    i = _first_repeated_reading(wifi, wifi_codes)
+    if i >= 0:
         raise InputError(
             f"duplicate reading (walk {_v(wifi['walk_id'].iloc[i])}, t_s={_v(wifi['t_s'].iloc[i])}, "
             f"bssid {_v(wifi['bssid'].iloc[i])})",
             ww(i),
         )
-    pose_walks = set(poses["walk_id"].unique())
-    orphan = ~wifi["walk_id"].isin(pose_walks).to_numpy()
+    pose_walks = set(pose_walk_ids)
+    orphan = ~wifi_walk_ids.isin(pose_walks)[wifi_codes]
     if orphan.any():
         i = _first(orphan)
         raise InputError(f"Wi-Fi reading of walk {_v(wifi['walk_id'].iloc[i])}, which has no poses", ww(i))
@@ -148,25 +151,46 @@ def validate(raw: RawInput, cfg: IngestConfig) -> None:
         wid = sorted(missing)[0]
         raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
                          wp(_first((poses["walk_id"] == wid).to_numpy())))
+    return {"poses": (pose_codes, pose_walk_ids), "wifi": (wifi_codes, wifi_walk_ids)}
 
 
-def attach(poses: pd.DataFrame, wifi: pd.DataFrame, cfg: IngestConfig) -> np.ndarray:
+def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
+    """The first row repeating an earlier row's (walk, t_s, bssid), -1 when none (as ``DataFrame.duplicated``).
+    Rows ordered by walk and time (the usual file) are keyed by scan run and BSSID code: no hashing of text
+    pairs."""
+    t = wifi["t_s"].to_numpy(dtype=np.float64)
+    dw, dt = np.diff(walk_codes), np.diff(t)
+    if (dw >= 0).all() and ((dw > 0) | (dt >= 0)).all():
+        scan = np.cumsum(np.r_[0, (dw != 0) | (dt != 0)])  # equal (walk, time) rows are one run here
+        b, uniq = pd.factorize(wifi["bssid"], use_na_sentinel=False)
+        key = scan * max(len(uniq), 1) + b
+        if not (np.diff(np.sort(key)) == 0).any():  # a sort finds that there is none (the usual case)
+            return -1
+        dup = pd.Series(key).duplicated().to_numpy()
+    else:
+        dup = wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
+    return _first(dup) if dup.any() else -1
+
+
+def attach(poses: pd.DataFrame, pose_walk: np.ndarray, wifi: pd.DataFrame, wifi_walk: np.ndarray,
+           cfg: IngestConfig) -> np.ndarray:
     """Node id (row of ``poses``) of every reading, -1 where it lies too far outside its walk's poses.
 
-    ``poses`` must be sorted by walk then time with a RangeIndex. "interval": node k takes the readings
-    with t_k <= t < t_{k+1}; "nearest": the node nearest in time. Readings more than
-    ``cfg.max_attach_gap_s`` before the first / after the last pose of the walk are not attached.
+    ``poses`` must be sorted by walk then time with a RangeIndex; ``pose_walk``, ``wifi_walk``: the walk
+    number of each pose (ascending) and of each reading. "interval": node k takes the readings with
+    t_k <= t < t_{k+1}; "nearest": the node nearest in time. Readings more than ``cfg.max_attach_gap_s``
+    before the first / after the last pose of the walk are not attached.
     """
     node = np.full(len(wifi), -1, dtype=np.int64)
-    pw = poses["walk_id"].to_numpy()
     pt = poses["t_s"].to_numpy(dtype=np.float64)
-    starts = np.r_[0, np.flatnonzero(pw[1:] != pw[:-1]) + 1]
-    ends = np.r_[starts[1:], len(pw)]
-    span = {pw[s]: (int(s), int(e)) for s, e in zip(starts, ends)}
     wt = wifi["t_s"].to_numpy(dtype=np.float64)
-    groups = wifi.groupby("walk_id", sort=False).indices
-    for wid, rows in groups.items():
-        s, e = span[wid]
+    n_walks = int(max(pose_walk.max(initial=-1), wifi_walk.max(initial=-1))) + 1
+    span = np.searchsorted(pose_walk, np.arange(n_walks + 1))
+    by_walk = np.argsort(wifi_walk, kind="stable")
+    cuts = np.searchsorted(wifi_walk[by_walk], np.arange(n_walks + 1))
+    for w in np.flatnonzero(np.diff(cuts)):
+        rows = by_walk[cuts[w]:cuts[w + 1]]
+        s, e = int(span[w]), int(span[w + 1])
         t = pt[s:e]
         r = wt[rows]
         if cfg.attach == "interval":
@@ -327,7 +351,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     of each walk with raw IMU (progress).
     """
     reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig(), on_walk)
-    validate(raw, cfg)
+    codes = validate(raw, cfg)
     walks = raw.walks.copy()
     for c in WALK_COLUMNS:
         if c not in walks.columns:
@@ -340,29 +364,28 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     walks = walks[has_poses].reset_index(drop=True)
     walk_index = pd.Index(walks["walk_id"])
 
-    poses = raw.poses.copy()
-    poses["_w"] = _positions(walk_index, poses["walk_id"])
-    poses = poses.sort_values(["_w", "t_s"], kind="stable").drop(columns="_w").reset_index(drop=True)
-    poses["step"] = poses.groupby("walk_id", sort=False).cumcount().astype(np.int64)
+    poses, pose_walk = _order_by_walk(raw.poses, walk_index, codes["poses"])
+    new_walk = np.r_[True, pose_walk[1:] != pose_walk[:-1]]
+    row = np.arange(len(poses))
+    poses["step"] = row - np.maximum.accumulate(np.where(new_walk, row, 0))  # the row's number in its walk
     for c in ("yaw_abs_rad", "yaw_abs_sigma_rad", "step_freq_hz"):
         if c not in poses.columns:
             poses[c] = np.nan
     poses = poses[list(POSE_COLUMNS) + [c for c in poses.columns if c not in POSE_COLUMNS]]
-    one_step = poses.groupby("walk_id", sort=False).size()
-    one_step = one_step[one_step < 2]
+    one_step = walk_index[np.bincount(pose_walk, minlength=len(walk_index)) == 1]
 
-    wifi = raw.wifi.copy()
+    wifi = raw.wifi
     if "freq_mhz" not in wifi.columns:
-        wifi["freq_mhz"] = np.nan
+        wifi = wifi.assign(freq_mhz=np.nan)
     if "ssid" not in wifi.columns:
-        wifi["ssid"] = ""
-    wifi["_w"] = _positions(walk_index, wifi["walk_id"])
-    wifi = wifi.sort_values(["_w", "t_s"], kind="stable").drop(columns="_w").reset_index(drop=True)
-    wifi["node"] = attach(poses, wifi, cfg)
+        wifi = wifi.assign(ssid="")
+    wifi, wifi_walk = _order_by_walk(wifi, walk_index, codes["wifi"])
+    wifi["node"] = attach(poses, pose_walk, wifi, wifi_walk, cfg)
     all_readings = wifi   # for the PDR's Wi-Fi check: a walk without steps keeps no readings attached
-    n_dropped = int((wifi["node"] < 0).sum())
-    wifi = wifi[wifi["node"] >= 0].reset_index(drop=True)
-    wifi = wifi[list(WIFI_COLUMNS)]
+    attached = wifi["node"].to_numpy() >= 0
+    n_dropped = int((~attached).sum())
+    wifi_walk = wifi_walk[attached]
+    wifi = wifi[list(WIFI_COLUMNS)][attached].reset_index(drop=True)
     wifi["rssi_dbm"] = wifi["rssi_dbm"].astype(np.float32)
 
     fixes = raw.fixes.copy()
@@ -382,7 +405,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
         venue=raw.venue, extra={"truth": dict(raw.truth_extra)},
     )
     fp = Fingerprints.from_readings(wifi)
-    scan = scan_ids(pd.factorize(wifi["walk_id"])[0], wifi["t_s"].to_numpy(np.float64))
+    scan = scan_ids(wifi_walk, wifi["t_s"].to_numpy(np.float64))
     scans = int(scan.max()) + 1 if len(scan) else 0
     summary: dict[str, Any] = {
         "walks": len(walks),
@@ -401,7 +424,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     }
     if reports:
         summary["pdr"] = _pdr_summary(reports)
-    no_wifi = sorted(set(ds.walks["walk_id"].astype(str)) - set(ds.wifi["walk_id"].astype(str).unique()))
+    no_wifi = sorted(str(w) for w in walk_index[np.bincount(wifi_walk, minlength=len(walk_index)) == 0])
     if no_wifi:
         summary["warnings"].append(
             f"{len(no_wifi)} walk(s) without Wi-Fi readings kept without radio evidence (placed only by session "
@@ -409,7 +432,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     if dropped_walks:
         summary["warnings"].append(f"{len(dropped_walks)} walk(s) without poses dropped: {dropped_walks[:5]}")
     if len(one_step):
-        summary["warnings"].append(f"{len(one_step)} walk(s) with a single step: {list(one_step.index[:5])}")
+        summary["warnings"].append(f"{len(one_step)} walk(s) with a single step: {[str(w) for w in one_step[:5]]}")
     if n_dropped:
         summary["warnings"].append(
             f"{n_dropped} Wi-Fi reading(s) more than {cfg.max_attach_gap_s:g} s outside their walk's poses "
@@ -418,11 +441,18 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     return ds, fp, summary
 
 
-def _positions(index: pd.Index, values: pd.Series) -> np.ndarray:
-    """``index.get_indexer(values)`` through the distinct values (a few walks, many rows: several times faster
-    than looking every row up)."""
-    codes, uniq = pd.factorize(values)
-    return index.get_indexer(uniq)[codes]
+def _order_by_walk(df: pd.DataFrame, walk_index: pd.Index, codes: tuple[np.ndarray, pd.Index]
+                   ) -> tuple[pd.DataFrame, np.ndarray]:
+    """``df`` (rows of the walks of ``walk_index``; ``codes``: its rows' ``pd.factorize`` of walk_id) ordered by
+    walk, in the index's order, then by time (file order among equal keys), with a RangeIndex; and each row's
+    walk (its position in ``walk_index``)."""
+    w = walk_index.get_indexer(codes[1])[codes[0]]
+    t = df["t_s"].to_numpy(dtype=np.float64)
+    dw = np.diff(w)
+    if (dw >= 0).all() and ((dw > 0) | (np.diff(t) >= 0)).all():  # ordered already (the usual input)
+        return df.reset_index(drop=True), w
+    order = np.lexsort((t, w))
+    return df.take(order).reset_index(drop=True), w[order]
 
 
 def _match_truth(poses: pd.DataFrame, truth: pd.DataFrame, raw: RawInput, max_gap_s: float) -> pd.DataFrame:

@@ -3,8 +3,9 @@
 With missing readings filled by a constant, ``a = rss − fill`` is 0 wherever an AP is not detected, and a
 scan detects ~20 of ~200 APs. Reference points (RPs) are sorted along a Morton curve of their positions and
 cut into blocks of :data:`RP_BLOCK`; a block's RPs detect few APs between them (~70 of 186 on the `large`
-preset), so ``−2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only. ``‖a_r‖²`` is
-precomputed; ``‖a_q‖²`` is a per-query constant and does not change the ranking. A few queries at a time
+preset), so ``‖a_r‖² − 2 a_q·a_r`` of a whole block is one float32 matrix product over those APs only, with
+``‖a_r‖²`` as one more column against a row of ones (no separate pass over the distances); ``‖a_q‖²`` is a
+per-query constant and does not change the ranking. A few queries at a time
 (one-at-a-time localization) go one by one: one float32 vector-matrix product over the rows (APs) of
 ``−2 aᵀ`` the query detects, in the original RP order, and one ``partition`` (the caller re-ranks over
 the query's detected APs only, :meth:`KnnLocalizer._kneighbors_few`). (An inverted index — per AP,
@@ -12,9 +13,11 @@ the RPs detecting it — with a weighted ``bincount`` over the query's postings 
 are the common ones, ~90k postings of 1.6M entries, and the scattered sums cost more than the dense rows.)
 
 The ``c`` smallest entries of each query's row come from a two-level selection: the minimum of every group
-of :data:`GROUP` consecutive RPs, the ``c`` groups with the smallest minima (any of the ``c`` nearest RPs
-lies in one of them, ties aside), then the ``c`` smallest of those groups' entries. The float32 shortlist is
-meant to be re-ranked exactly by the caller. Measured against scikit-learn in bench/bench_map.py.
+of :data:`GROUP` consecutive RPs (taken block by block right after the block's product, while it is in
+cache: a separate pass over the whole matrix cost as much as half the products), the ``c`` groups with the
+smallest minima (any of the ``c`` nearest RPs lies in one of them, ties aside), then the ``c`` smallest of
+those groups' entries. The float32 shortlist is meant to be re-ranked exactly by the caller. Measured
+against scikit-learn in bench/bench_map.py.
 """
 
 from __future__ import annotations
@@ -74,11 +77,14 @@ class SparseL2Shortlist:
         self.sq = sq
         self.wt = np.ascontiguousarray(-2.0 * a.T, dtype=np.float32)  # (n_ap, n_rp), original order: one query
         self.sq_orig = sq[:n_rp][np.argsort(self.perm)]
+        # per block: its rows, the AP columns its RPs detect plus the constant row (index n_ap) that adds
+        # ‖a_r‖² inside the product, and [−2 a_r over those columns | ‖a_r‖²]
         self.blocks: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         for s in range(0, self.n_pad, RP_BLOCK):
             e = min(s + RP_BLOCK, self.n_pad)
             cols = np.flatnonzero((ap[s:e] != 0).any(axis=0))
-            self.blocks.append((s, e, cols, np.ascontiguousarray(-2.0 * ap[s:e][:, cols])))
+            w = np.hstack([-2.0 * ap[s:e][:, cols], sq[s:e, None]])
+            self.blocks.append((s, e, np.r_[cols, n_ap], np.ascontiguousarray(w, dtype=np.float32)))
 
     def one(self, cols: np.ndarray, vals: np.ndarray, c: int) -> np.ndarray:
         """(c,) RP indices holding the ``c`` nearest of one query, ties aside: the query detects the AP columns
@@ -91,18 +97,19 @@ class SparseL2Shortlist:
         j = np.flatnonzero(d <= kth)
         return j if len(j) == c else np.argpartition(d, c - 1)[:c]
 
-    def _distances(self, aq: np.ndarray) -> np.ndarray:
-        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding)."""
+    def _distances(self, aq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding), and
+        (n_pad / GROUP, nq) the minimum of each group of GROUP rows, taken while a block is in cache."""
         nq = len(aq)
-        aqt = np.ascontiguousarray(aq.T, dtype=np.float32)  # (n_ap, nq)
+        aqt = np.empty((self.n_ap + 1, nq), dtype=np.float32)  # the query's a, then a row of ones
+        aqt[:self.n_ap] = aq.T
+        aqt[self.n_ap] = 1.0
         dt = np.empty((self.n_pad, nq), dtype=np.float32)
+        gmin = np.empty((self.n_pad // GROUP, nq), dtype=np.float32)
         for s, e, cols, w in self.blocks:
-            if len(cols):
-                np.matmul(w, aqt[cols], out=dt[s:e])
-            else:
-                dt[s:e] = 0.0
-        dt += self.sq[:, None]
-        return dt
+            np.matmul(w, aqt[cols], out=dt[s:e])
+            np.min(dt[s:e].reshape(-1, GROUP, nq), axis=1, out=gmin[s // GROUP:e // GROUP])
+        return dt, gmin
 
     def chunk_queries(self, nq: int) -> int:
         """Queries per chunk: the (RP, query) distances of a chunk within CHUNK_ELEMS, one chunk per thread."""
@@ -111,16 +118,16 @@ class SparseL2Shortlist:
     def select(self, aq: np.ndarray, c: int) -> np.ndarray:
         """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside, for one chunk
         of queries on the calling thread; ``c <= n_rp``."""
-        return self._select(self._distances(aq), c)
+        return self._select(*self._distances(aq), c)
 
-    def _select(self, dt: np.ndarray, c: int) -> np.ndarray:
-        """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq)."""
+    def _select(self, dt: np.ndarray, gmin: np.ndarray, c: int) -> np.ndarray:
+        """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq), whose
+        groups' minima are ``gmin``."""
         nq = dt.shape[1]
         if c * GROUP >= self.n_pad:
             rows = np.broadcast_to(np.arange(self.n_pad), (nq, self.n_pad))
         else:
-            gmin = np.ascontiguousarray(dt.reshape(-1, GROUP, nq).min(axis=1).T)  # (nq, n_groups)
-            gs = smallest(gmin, c)
+            gs = smallest(np.ascontiguousarray(gmin.T), c)
             rows = (gs[:, :, None] * GROUP + np.arange(GROUP)).reshape(nq, -1)
         vals = dt[rows, np.arange(nq)[:, None]]
         return self.perm[np.take_along_axis(rows, smallest(vals, c), axis=1)]

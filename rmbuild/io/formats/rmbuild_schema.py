@@ -328,11 +328,13 @@ def coerce(loc: _Located, columns: dict[str, str]) -> None:
         s = df[c]
         if kind == "str":
             # Parquet may hold None; ids given as numbers in a typed file become their text ("1")
-            text = s.where(~s.isna(), "").astype(str)
-            bad = (text.str.strip() == "").to_numpy()
-            if c in ("walk_id", "bssid") and bad.any():
-                raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
-            df[c] = text
+            text = s.where(~s.isna(), "").astype(str) if s.hasnans or s.dtype != "str" else s
+            if c in ("walk_id", "bssid"):
+                bad = (text.str.strip() == "").to_numpy()
+                if bad.any():
+                    raise InputError(f"empty {c}", loc.where(int(np.argmax(bad))))
+            if text is not s:
+                df[c] = text
             continue
         v, bad = _numbers(s)
         if bad.any():
@@ -344,7 +346,8 @@ def coerce(loc: _Located, columns: dict[str, str]) -> None:
         inf = np.isinf(v)
         if inf.any():
             raise InputError(f"column {c}: infinite value", loc.where(int(np.argmax(inf))))
-        df[c] = v
+        if s.dtype != np.float64:
+            df[c] = v
 
 
 def _concat(parts: list[_Located]) -> tuple[pd.DataFrame, Callable[[int], str]]:
