@@ -128,12 +128,17 @@ def at_fix_times(poses: pd.DataFrame, fixes: pd.DataFrame) -> np.ndarray:
 
 def aligned_errors(est: np.ndarray, truth: np.ndarray, fit: np.ndarray) -> np.ndarray:
     """‖R est + t − truth‖ per point after one SE(2) fit on the finite points selected by ``fit``."""
+    return np.linalg.norm(aligned_error_vectors(est, truth, fit), axis=1)
+
+
+def aligned_error_vectors(est: np.ndarray, truth: np.ndarray, fit: np.ndarray) -> np.ndarray:
+    """(n, 2): R est + t − truth per point after one SE(2) fit on the finite points selected by ``fit``."""
     ok = np.isfinite(est).all(axis=1)
     use = fit & ok if (fit & ok).sum() >= 2 else ok
     if use.sum() < 2:
-        return np.full(len(est), np.nan)
+        return np.full((len(est), 2), np.nan)
     r, t = fit_se2(est[use], truth[use])
-    return np.linalg.norm(est @ r.T + t - truth, axis=1)
+    return est @ r.T + t - truth
 
 
 def resample_path(xy: np.ndarray, step: float = PATH_STEP_M) -> np.ndarray:
@@ -274,8 +279,9 @@ def waypoint_errors(ws: Path, linked: set[str]) -> pd.DataFrame:
     is_linked = np.isin(wid, list(linked))
     e_raw = aligned_errors(at_fix_times(raw, fixes), truth, np.ones(len(fixes), bool))
     est_opt = at_fix_times(opt, fixes)
-    e_opt = aligned_errors(est_opt, truth, is_linked)
-    df = pd.DataFrame({"walk_id": wid, "linked": is_linked, "err_raw": e_raw, "err_opt": e_opt,
+    v_opt = aligned_error_vectors(est_opt, truth, is_linked)
+    df = pd.DataFrame({"walk_id": wid, "linked": is_linked, "err_raw": e_raw, "err_opt": np.linalg.norm(v_opt, axis=1),
+                       "dx_opt": v_opt[:, 0], "dy_opt": v_opt[:, 1],
                        # no fit: meaningful only when the back end put the walks in the building frame itself
                        "err_opt_unaligned": np.linalg.norm(est_opt - truth, axis=1)})
     df["err_all"] = np.where(df["linked"], df["err_opt"], df["err_raw"])
@@ -340,6 +346,18 @@ def landmark_block(wp: pd.DataFrame, per_walk: pd.DataFrame, gauge: str | None) 
     }
 
 
+def offset_split(wp: pd.DataFrame) -> dict | None:
+    """Where the linked walks' error sits: the mean over linked walks of |their mean error vector| (the walk's
+    offset: where it sits) and of the mean error left once that offset is removed (its shape), metres."""
+    lk = wp[wp["linked"] & wp["dx_opt"].notna()]
+    if not len(lk):
+        return None
+    mean = lk.groupby("walk_id")[["dx_opt", "dy_opt"]].transform("mean")
+    resid = np.hypot(lk["dx_opt"] - mean["dx_opt"], lk["dy_opt"] - mean["dy_opt"]).groupby(lk["walk_id"]).mean()
+    off = np.hypot(*lk.groupby("walk_id")[["dx_opt", "dy_opt"]].mean().to_numpy().T)
+    return {"offset_m": round(float(np.mean(off)), 2), "shape_m": round(float(resid.mean()), 2)}
+
+
 def knn_block(ev: dict) -> dict:
     b, s = nested(ev, "maps", "built", "knn", "median"), nested(ev, "maps", "surveyed", "knn", "median")
     return {"built_median_m": b, "surveyed_median_m": s,
@@ -399,6 +417,7 @@ def score_workspace(ws: Path) -> dict:
                      for r in LINK_RADII_M},
         "linked": int(pw["linked"].sum()), "linked_pct": round(100 * pw["linked"].mean(), 1) if n else None,
         "landmark_m": landmark_block(wp, pw, rep.get("gauge")),
+        "linked_error_split": offset_split(wp),
         "report_landmark_m": {"raw": nested(rep, "raw", "landmark_error_m", "mean"),
                               "optimized": nested(rep, "optimized", "landmark_error_m", "mean"),
                               "gauge": rep.get("gauge"), "fitted_on": nested(rep, "metrics_alignment", "fitted_on")},
@@ -439,7 +458,7 @@ def _f(v, fmt: str = "{:.1f}") -> str:
 
 def md_row(r: dict) -> str:
     if "skipped" in r or "error" in r:
-        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 10
+        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 11
     n, lm, rl, k = r["walks"], r["landmark_m"], r["report_landmark_m"], r["knn"]
     conf = r["confidence_rank"]
     st = r["stages"]
@@ -450,6 +469,7 @@ def md_row(r: dict) -> str:
         f"{_f(nested(lm, 'raw', 'mean'))} → {_f(nested(lm, 'all_walks_unlinked_at_raw', 'mean'))}",
         f"{_f(rl['raw'])} → {_f(rl['optimized'])}",
         f"{_f(nested(lm, 'linked_walks', 'mean'))} / {_f(nested(lm, 'linked_walks', 'median'))}",
+        f"{_f(nested(r, 'linked_error_split', 'offset_m'))} / {_f(nested(r, 'linked_error_split', 'shape_m'))}",
         f"{lm['linked_worse_than_raw']} ({lm[f'linked_over_{WORSE_THAN_M:g}m']})",
         f"{_f(k['built_median_m'])} / {_f(k['surveyed_median_m'])} ({_f(k['ratio'], '{:.2f}')}×)",
         f"{_f(conf['rho'], '{:+.2f}')} ({conf['column'] or '–'})",
@@ -461,8 +481,9 @@ def md_row(r: dict) -> str:
 
 HEADER = ("| floor | walks | walks sharing ≥ half their path (5 m) | linked | linkable by truth, 8 / 12 m | "
           "landmark error all walks, raw → optimised (unlinked at raw) m | same, rmbuild's report m | "
-          "linked walks mean / median m | linked walks worse than raw (> 10 m) | kNN median built / surveyed m | "
-          "confidence vs error ρ | time ingest / optimize / export-map / evaluate s | peak MB |\n|" + "---|" * 13)
+          "linked walks mean / median m | linked walks' offset / shape m | linked walks worse than raw (> 10 m) | "
+          "kNN median built / surveyed m | "
+          "confidence vs error ρ | time ingest / optimize / export-map / evaluate s | peak MB |\n|" + "---|" * 14)
 
 NOTES = """
 - **Truth**: the surveyed waypoints (ILC `TYPE_WAYPOINT`, IPIN `POSI`), for scoring only. A walk's true path is
@@ -483,6 +504,8 @@ NOTES = """
   way "never worse than raw" is judged. *rmbuild's report*: the optimize report as written (there, unlinked
   walks count where the optimiser left them). *Worse than raw*: linked walks whose mean waypoint error after
   optimisation exceeds their raw one (in brackets: linked walks above 10 m).
+- **Offset / shape**: the linked walks' error split into where each walk sits (the mean over walks of the length
+  of its mean error vector) and its shape (the mean error left once that offset is removed).
 - **kNN**: median localisation error of `evaluate`'s kNN on its held-out walks with the map built from the
   optimised poses vs the map from surveyed positions.
 - **ρ**: Spearman rank correlation over linked walks between the per-walk column named in brackets and the

@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.bench_real import aligned_errors, at_fix_times, fit_se2, linkable_walks, linked_walks, shared_path_share
+from bench.bench_real import (
+    aligned_errors,
+    at_fix_times,
+    fit_se2,
+    linkable_walks,
+    linked_walks,
+    offset_split,
+    shared_path_share,
+)
 
 
 def test_fit_se2_recovers_a_rigid_transform_and_errors_vanish():
@@ -71,3 +79,12 @@ def test_linkable_walks_joins_by_shared_path_and_by_a_device_continuing_nearby()
     assert linkable_walks(fixes, walks, poses, 8.0) == 2
     fixes.loc[fixes["walk_id"] == "c", "t_s"] -= 50.0  # gap 46 s: b-c joined (c-d 97 m apart)
     assert linkable_walks(fixes, walks, fixes[["walk_id", "t_s"]], 8.0) == 3
+
+
+def test_offset_split_separates_where_a_walk_sits_from_its_shape():
+    wp = pd.DataFrame({"walk_id": ["a"] * 4 + ["b"] * 2 + ["c"] * 2, "linked": [True] * 6 + [False] * 2,
+                       "dx_opt": [3.0, 3.0, 3.0, 3.0, 1.0, -1.0, 50.0, 50.0],  # a: shifted 5 m; b: 1 m either side
+                       "dy_opt": [4.0, 4.0, 4.0, 4.0, 0.0, 0.0, 0.0, 0.0]})
+    split = offset_split(wp)
+    assert split == {"offset_m": 2.5, "shape_m": 0.5}  # offsets 5 and 0; shapes 0 and 1; c is not linked
+    assert offset_split(wp.assign(linked=False)) is None
