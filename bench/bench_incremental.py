@@ -202,7 +202,7 @@ def markdown(result: dict) -> str:
     loads = [x for r in result["floors"].values() for run in r.get("runs", {}).values()
              for x in run.get("load_average_before", [])]
     if loads:
-        lines += ["", f"Load average (1 min, {result.get('machine', {}).get('cpus', '?')} CPUs) before the timed "
+        lines += ["", f"Load average (1 min, {os.cpu_count()} CPUs) before the timed "
                   f"commands: {min(loads):.1f}-{max(loads):.1f}."]
     return "\n".join(lines) + "\n"
 
