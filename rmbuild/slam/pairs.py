@@ -196,9 +196,12 @@ def run_matched_candidates(
     for s in range(0, n_seg, bs):
         rows = np.arange(s, min(n_seg, s + bs))
         d, common = srm.block(rows)
-        bad = ~_allowed(smeta, rows, slice(None), pcfg, within=pcfg.within_walk)
-        bad |= common < pcfg.min_common_aps
-        d[bad] = np.inf
+        d[common < pcfg.min_common_aps] = np.inf
+        # only the columns of the rows' own walks can be disallowed (_allowed is True across walks)
+        same = np.flatnonzero(np.isin(smeta.walk, np.unique(smeta.walk[rows])))
+        sub = d[:, same]
+        sub[~_allowed(smeta, rows, same, pcfg, within=pcfg.within_walk)] = np.inf
+        d[:, same] = sub
         if n_seg > k:
             idx = np.argpartition(d, k - 1, axis=1)[:, :k]
         else:
