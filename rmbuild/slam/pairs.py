@@ -29,7 +29,7 @@ Progress = Callable[[str, dict], None] | None
 #: keep the full 1,024-row blocks; a venue-month's 50,000 get 335 rows)
 BLOCK_ELEMS = 1 << 24
 #: segments; every this-many-th segment is the sample that bounds each segment's k-th nearest distance
-#: (about top_k x this many candidates per segment are then ranked exactly)
+#: (about top_k x this many candidates per segment are then ranked)
 SAMPLE_STRIDE = 8
 
 
