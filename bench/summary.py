@@ -36,11 +36,22 @@ def _loc(d: dict, case: str, name: str, key: str = "mean") -> Any:
 def _month_case(c: dict) -> str:
     load = f" at load {c['load_at_start']:.0f}" if "load_at_start" in c else ""
     if c["status"] != "ok":
-        return f"{c['status']} ({c['reason']}) after {c['after_s']:.0f} s{load}"
+        return f"{c['status']} ({c['reason']}) after {c['after_s']:.0f} s{load}{_month_phases(c)}"
     t = c["time_s"]
     return (f"{c['optimize_total_s']:.0f} s ({t['pair_search']:.0f} / {t['init']:.0f} / {t['solve']:.0f}), "
             f"{c['peak_memory_mb']:,.0f} MB, linked walks' error "
             f"{(c['linked_error'] or {}).get('linked_mean_m', 0):.2f} m{load}")
+
+
+def _month_phases(c: dict) -> str:
+    """A killed case's phases from the times they were reached: pair search / placement / solve so far."""
+    p, end = c.get("phases_started_s", {}), c["after_s"]
+    if "pair_search_done" not in p:
+        return ""
+    out = f"; pair search {p['pair_search_done'] - p.get('pair_search', 0):.0f} s"
+    if "init" in p:  # "init" is reported when the placement ends
+        out += f", placement {p['init'] - p['pair_search_done']:.0f} s, solve and RF check > {end - p['init']:.0f} s"
+    return out
 
 
 def _month_500k(d: dict) -> str:

@@ -94,3 +94,20 @@ def test_run_matched_candidates_find_true_neighbours():
     err = np.abs(x[df["row_k"]] - x[df["row_q"]])
     assert len(df) > 20 and np.median(err) < 4.0  # a smooth path-loss-only field: metres of ambiguity
     assert isinstance(df, pd.DataFrame) and set(df["kind"]) == {"cross"}
+
+
+def test_segment_neighbours_equal_full_ranking():
+    """The bounded symmetric sweep finds each row's k nearest searchable rows, as ranking whole rows does."""
+    from rmbuild.slam.pairs import _allowed, segment_neighbours
+
+    fp, meta = _random(n=300, m=30, n_walks=6, seed=3)
+    rm = RssMatrix.from_fingerprints(fp, -110.0)
+    cfg = SearchParams(within_min_dt_s=20.0, within_min_path_m=10.0, block_rows=64)
+    si, sj = segment_neighbours(rm, meta, cfg, 5)
+    rows = np.arange(len(rm))
+    d, common = rm.block(rows)
+    d[(common < cfg.min_common_aps) | ~_allowed(meta, rows, slice(None), cfg, within=True)] = np.inf
+    for i in rows:
+        want = np.argsort(d[i], kind="stable")[:5]
+        want = set(want[np.isfinite(d[i, want])].tolist())
+        assert set(sj[si == i].tolist()) == want

@@ -28,6 +28,9 @@ Progress = Callable[[str, dict], None] | None
 #: entries (rows x columns) of one block of the segment search (16M: the `large` preset's ~5,000 segments
 #: keep the full 1,024-row blocks; a venue-month's 50,000 get 335 rows)
 BLOCK_ELEMS = 1 << 24
+#: segments; every this-many-th segment is the sample that bounds each segment's k-th nearest distance
+#: (about top_k x this many candidates per segment are then ranked)
+SAMPLE_STRIDE = 8
 
 
 @dataclass(frozen=True)
@@ -188,29 +191,7 @@ def run_matched_candidates(
     smeta = RowMeta(meta.node[first], meta.walk[first], meta.step[first],
                     np.bincount(seg, meta.t_s, n_seg) / cnt, np.bincount(seg, meta.path_m, n_seg) / cnt)
     k = min(pcfg.top_k, max(n_seg - 1, 1))
-    nb = np.full((n_seg, k), -1, np.int64)
-    nbd = np.full((n_seg, k), np.inf, np.float32)
-    # rows per block: at most half the block size, fewer on big inputs so one block's float64 temporaries
-    # stay ~BLOCK_ELEMS entries (1024 rows x 50,000 segments of a venue-month were 400 MB per temporary)
-    bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n_seg, 1)))
-    for s in range(0, n_seg, bs):
-        rows = np.arange(s, min(n_seg, s + bs))
-        d, common = srm.block(rows)
-        bad = ~_allowed(smeta, rows, slice(None), pcfg, within=pcfg.within_walk)
-        bad |= common < pcfg.min_common_aps
-        d[bad] = np.inf
-        if n_seg > k:
-            idx = np.argpartition(d, k - 1, axis=1)[:, :k]
-        else:
-            idx = np.tile(np.arange(n_seg), (len(rows), 1))[:, :k]
-        nb[rows] = idx
-        nbd[rows] = np.take_along_axis(d, idx, axis=1)
-        if progress:
-            progress("pair_search", {"done": int(rows[-1] + 1), "total": n_seg, "phase": "segments"})
-    si = np.repeat(np.arange(n_seg), k)
-    sj = nb.ravel()
-    ok = np.isfinite(nbd.ravel())
-    si, sj = si[ok], sj[ok]
+    si, sj = segment_neighbours(srm, smeta, pcfg, k, progress)
     if pcfg.mutual:
         key = set((si.astype(np.int64) * n_seg + sj).tolist())
         back = np.fromiter(((b * n_seg + a) in key for a, b in zip(si.tolist(), sj.tolist())), bool, len(si))
@@ -219,6 +200,59 @@ def run_matched_candidates(
     _, u = np.unique(si.astype(np.int64) * n_seg + sj, return_index=True)
     si, sj = si[u], sj[u]
     return _best_run_pairs(rm, meta, seg, first, cnt.astype(np.int64), si, sj, pcfg)
+
+
+def _masked_sq(srm: RssMatrix, smeta: RowMeta, rows: np.ndarray, cols: np.ndarray, pcfg: SearchParams) -> np.ndarray:
+    """Squared eq. 9 distances rows x cols (float32), inf where the pair is not searched (too few shared
+    APs, or same walk and not allowed by :func:`_allowed`)."""
+    d, common = srm.block_sq32(rows, cols)
+    d[common < pcfg.min_common_aps] = np.inf
+    # only the columns of the rows' own walks can be disallowed (_allowed is True across walks)
+    same = np.flatnonzero(np.isin(smeta.walk[cols], np.unique(smeta.walk[rows])))
+    sub = d[:, same]
+    sub[~_allowed(smeta, rows, cols[same], pcfg, within=pcfg.within_walk)] = np.inf
+    d[:, same] = sub
+    return d
+
+
+def segment_neighbours(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int,
+                       progress: Progress = None) -> tuple[np.ndarray, np.ndarray]:
+    """(si, sj): each segment's (up to) ``k`` nearest searchable segments (finite distance), one row per
+    (segment, neighbour).
+
+    Each row's k-th smallest distance to every SAMPLE_STRIDE-th segment bounds its k-th nearest from
+    above; one sweep over the upper triangle of the distance matrix (it is symmetric) then keeps every
+    entry within its row's or its column's bound, and the k smallest per row are taken from those."""
+    n = len(srm)
+    bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n, 1)))
+    sample = np.arange(0, n, SAMPLE_STRIDE)
+    bound = np.full(n, np.inf, np.float32)
+    if len(sample) > k:
+        for s in range(0, n, bs):
+            rows = np.arange(s, min(n, s + bs))
+            bound[rows] = np.partition(_masked_sq(srm, smeta, rows, sample, pcfg), k - 1, axis=1)[:, k - 1]
+    out_r, out_c, out_d = [], [], []
+    for s in range(0, n, bs):
+        e = min(n, s + bs)
+        rows, cols = np.arange(s, e), np.arange(s, n)
+        d = _masked_sq(srm, smeta, rows, cols, pcfg)
+        fin = np.isfinite(d)
+        r, c = np.nonzero(fin & (d <= bound[rows][:, None]))  # candidates of the rows
+        out_r += [rows[r]]
+        out_c += [cols[c]]
+        out_d += [d[r, c]]
+        r, c = np.nonzero(fin[:, e - s:] & (d[:, e - s:] <= bound[e:][None, :]))  # of the columns past the block
+        out_r += [cols[e - s + c]]
+        out_c += [rows[r]]
+        out_d += [d[r, e - s + c]]
+        if progress:
+            progress("pair_search", {"done": e, "total": n, "phase": "segments"})
+    ri, ci, dd = np.concatenate(out_r), np.concatenate(out_c), np.concatenate(out_d)
+    order = np.lexsort((ci, dd, ri))
+    ri, ci = ri[order], ci[order]
+    start = np.r_[0, np.flatnonzero(np.diff(ri)) + 1] if len(ri) else np.zeros(0, np.int64)
+    rank = np.arange(len(ri)) - np.repeat(start, np.diff(np.r_[start, len(ri)]))
+    return ri[rank < k], ci[rank < k]
 
 
 def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: SearchParams) -> pd.DataFrame:

@@ -95,7 +95,9 @@ class _Graph:
     def from_values(self, v: gtsam.Values) -> np.ndarray:
         w = self.walks
         full = np.zeros((w.n, 3))
-        full[self.kf_idx] = values_to_poses(v, nodes=self.kf_idx)
+        # the solve's values hold exactly the keyframes' Pose2s, in key order X(kf_idx[0]) < X(kf_idx[1]) < ...
+        full[self.kf_idx] = gtsam.utilities.extractPose2(v) if v.size() == len(self.kf_idx) else \
+            values_to_poses(v, nodes=self.kf_idx)
         return fill_chains(full, self.raw_s, w.starts[w.keep], w.ends[w.keep], self.kf)
 
 
