@@ -60,19 +60,21 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
     check = OverlapCheck(walks, sim)
     comp = placement.component
     xy = walks.world_xy(placement.world_T_walk, sim.row_node) if row_xy is None else row_xy
+    tree = cKDTree(xy)  # every row; the positions stay while walks are refuted, only the map's walks change
     out: list[int] = []
     most = MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1)
     placement.rf_overlap_scans = np.zeros(walks.n_walks, np.int64)
     placement.rf_log_lr = np.full(walks.n_walks, np.nan)
+    judged: dict[int, tuple[OverlapEvidence, np.ndarray]] = {}  # walk -> its figure, the walks it overlapped
     while len(out) < most:
         worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
+        in_map = comp[check.row_walk] == 0
         for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
             if w == placement.reference:
                 continue
-            others = np.flatnonzero((comp[check.row_walk] == 0) & (check.row_walk != w))
-            if placement.order is not None:  # the map the walk was placed onto, not walks placed onto it
-                others = others[placement.order[check.row_walk[others]] < placement.order[w]]
-            ev = check.evidence(w, xy[check.rows_of[w]], others, xy[others])
+            if w not in judged or np.isin(out[-1:], judged[w][1]).any():  # only a refuted walk changes it
+                judged[w] = check.evidence(w, xy, tree, in_map, placement.order)
+            ev = judged[w][0]
             placement.rf_overlap_scans[w], placement.rf_log_lr[w] = ev.n_overlap, ev.mean_log_lr
             if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
                 worst, worst_llr = w, ev.mean_log_lr
@@ -117,23 +119,29 @@ class OverlapCheck:
             out[rows] = np.where(ok, d, np.inf).min(axis=1)
         return out
 
-    def evidence(self, w: int, xy: np.ndarray, placed_rows: np.ndarray, placed_xy: np.ndarray) -> OverlapEvidence:
-        """Walk ``w`` with its scans at ``xy`` (rows ``rows_of[w]``) against the placed scans ``placed_rows`` at
-        ``placed_xy``."""
+    def evidence(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
+                 order: np.ndarray | None) -> tuple[OverlapEvidence, np.ndarray]:
+        """Walk ``w``'s scans against the scans of the other walks in the map (``in_map``, bool over rows)
+        placed before it (``order``, None: all), every row at ``xy`` (``tree`` over them); and the walks whose
+        scans it overlapped."""
         rw = self.rows_of[w]
-        if not len(rw) or not len(placed_rows):
-            return OverlapEvidence(0, float("nan"))
-        hits = cKDTree(placed_xy).query_ball_point(xy, NEAR_M)
+        none = (OverlapEvidence(0, float("nan")), np.zeros(0, np.int64))
+        if not len(rw):
+            return none
+        ok_row = in_map & (self.row_walk != w)
+        if order is not None:  # the map the walk was placed onto, not walks placed onto it
+            ok_row &= order[self.row_walk] < order[w]
+        hits = [h[ok_row[h]] for h in (np.asarray(h, np.int64) for h in tree.query_ball_point(xy[rw], NEAR_M))]
         has = np.array([len(h) > 0 for h in hits])
         if not has.any():
-            return OverlapEvidence(0, float("nan"))
-        cols = np.unique(np.concatenate([hits[i] for i in np.flatnonzero(has)]).astype(np.int64))
-        near = np.linalg.norm(xy[has][:, None, :] - placed_xy[cols][None, :, :], axis=2) < NEAR_M
-        d, common = self.sim.rss.block(rw[has], placed_rows[cols])
+            return none
+        cols = np.unique(np.concatenate([hits[i] for i in np.flatnonzero(has)]))
+        near = np.linalg.norm(xy[rw[has]][:, None, :] - xy[cols][None, :, :], axis=2) < NEAR_M
+        d, common = self.sim.rss.block(rw[has], cols)
         ok = near & (common >= self.sim.min_common)
         llr = np.where(ok, self.sim.rf.log_lr(np.where(ok, d - self.offset_db[w], 0.0)), np.nan)
         seen = ok.any(axis=1)
         if not seen.any():
-            return OverlapEvidence(0, float("nan"))
+            return none
         per_scan = np.nanmedian(llr[seen], axis=1)
-        return OverlapEvidence(int(seen.sum()), float(np.mean(per_scan)))
+        return OverlapEvidence(int(seen.sum()), float(np.mean(per_scan))), np.unique(self.row_walk[cols])
