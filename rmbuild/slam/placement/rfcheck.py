@@ -47,6 +47,8 @@ MIN_OVERLAP_SCANS = 5
 # share of the reference component's walks the check may refute at most (a safeguard: when most of a map
 # looks inconsistent the RF model, not the placement, is the likelier fault)
 MAX_REFUTED_SHARE = 0.5
+# entries (rows x all rows) per block of the phone-offset pass: its float64 temporaries stay ~100 MB
+OFFSET_BLOCK_ELEMS = BLOCK_ELEMS // 4
 
 
 def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
@@ -111,7 +113,7 @@ class OverlapCheck:
         ``min_common`` APs; inf if none), in blocks of rows against all rows at once."""
         n = len(self.row_walk)
         out = np.full(n, np.inf)
-        step = max(1, BLOCK_ELEMS // max(n, 1))
+        step = max(1, OFFSET_BLOCK_ELEMS // max(n, 1))
         for lo in range(0, n, step):
             rows = np.arange(lo, min(lo + step, n))
             d, common = self.sim.rss.block(rows, slice(None))
