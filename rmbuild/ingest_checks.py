@@ -212,12 +212,17 @@ def _scan_groups(scan: np.ndarray, rssi: np.ndarray, ap: np.ndarray, walk_codes:
     return by_scan, start, scan_walk, top
 
 
+def walk_time_ordered(walk_codes: np.ndarray, t: np.ndarray) -> bool:
+    """Whether the rows are ordered by walk code, then by time (as ingest leaves them; the usual file)."""
+    dw = np.diff(walk_codes)
+    return bool((dw >= 0).all() and ((dw > 0) | (np.diff(t) >= 0)).all())
+
+
 def scan_ids(walk_codes: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Per reading, its scan's number: (walk, time) groups numbered in order of first appearance. Readings
     ordered by walk and time (as ingest leaves them) are numbered by their runs, others by a groupby."""
-    dw, dt = np.diff(walk_codes), np.diff(t)
-    if (dw >= 0).all() and ((dw > 0) | (dt >= 0)).all():
-        return np.cumsum(np.r_[0, (dw != 0) | (dt != 0)])
+    if walk_time_ordered(walk_codes, t):
+        return np.cumsum(np.r_[0, (np.diff(walk_codes) != 0) | (np.diff(t) != 0)])
     return pd.DataFrame({"w": walk_codes, "t": t}).groupby(["w", "t"], sort=False).ngroup().to_numpy()
 
 

@@ -16,7 +16,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.geometry import wrap
-from rmbuild.ingest_checks import scan_ids
+from rmbuild.ingest_checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import FIX_COLUMNS, POSE_COLUMNS, WALK_COLUMNS, WIFI_COLUMNS, Dataset, Fingerprints
@@ -159,9 +159,8 @@ def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
     Rows ordered by walk and time (the usual file) are keyed by scan run and BSSID code: no hashing of text
     pairs."""
     t = wifi["t_s"].to_numpy(dtype=np.float64)
-    dw, dt = np.diff(walk_codes), np.diff(t)
-    if (dw >= 0).all() and ((dw > 0) | (dt >= 0)).all():
-        scan = np.cumsum(np.r_[0, (dw != 0) | (dt != 0)])  # equal (walk, time) rows are one run here
+    if walk_time_ordered(walk_codes, t):
+        scan = scan_ids(walk_codes, t)  # equal (walk, time) rows are one run here
         b, uniq = pd.factorize(wifi["bssid"], use_na_sentinel=False)
         key = scan * max(len(uniq), 1) + b
         if not (np.diff(np.sort(key)) == 0).any():  # a sort finds that there is none (the usual case)
@@ -448,8 +447,7 @@ def _order_by_walk(df: pd.DataFrame, walk_index: pd.Index, codes: tuple[np.ndarr
     walk (its position in ``walk_index``)."""
     w = walk_index.get_indexer(codes[1])[codes[0]]
     t = df["t_s"].to_numpy(dtype=np.float64)
-    dw = np.diff(w)
-    if (dw >= 0).all() and ((dw > 0) | (np.diff(t) >= 0)).all():  # ordered already (the usual input)
+    if walk_time_ordered(w, t):  # ordered already (the usual input)
         return df.reset_index(drop=True), w
     order = np.lexsort((t, w))
     return df.take(order).reset_index(drop=True), w[order]
