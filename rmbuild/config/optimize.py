@@ -57,6 +57,9 @@ class WifiConfig:
     # sigma across / along the walking direction of pairs of (anti)parallel nodes: 1 = isotropic (paper),
     # 0 = estimated from the solved pairs after each solve.
     across_ratio: float = bounded(0.0, 0.0, 1.0)
+    # remove each device's RSS offset against the most common device (estimated from the data, reported
+    # in optimize.json) before fingerprints are compared; off when all phones read alike.
+    calibrate_devices: bool = True
 
     def validate(self) -> None:
         check_ranges(self, "wifi.")

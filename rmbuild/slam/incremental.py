@@ -39,6 +39,7 @@ import pandas as pd
 from rmbuild import geometry
 from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.errors import InputError
+from rmbuild.slam import devices
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import Links, RotationPriors, Ties
 from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, CompassSource
@@ -221,7 +222,7 @@ def _rf_model(report: dict | None, walks: WalkSet, rss: RssMatrix, meta: RowMeta
 def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: OptimizeConfig, rf_report: dict | None):
     """kNN growth of the free walks from the held ones (component 0, identity frames); then the walks left
     over joined along continuity ties (turned to the compass first) and, when some were, growth again."""
-    fp = mw.fingerprints
+    fp, _ = devices.rf_fingerprints(mw, cfg.wifi.calibrate_devices)
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]

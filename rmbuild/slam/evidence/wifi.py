@@ -21,6 +21,7 @@ import pandas as pd
 
 from rmbuild import geometry
 from rmbuild.config.optimize import WifiConfig
+from rmbuild.slam import devices
 from rmbuild.slam.evidence.base import EvidenceSource, Links, SolveState, Update
 from rmbuild.slam.factors import (
     anisotropic_factor,
@@ -78,7 +79,7 @@ class WifiSource(EvidenceSource):
         self.warnings: list[str] = []
         self.cfg = cfg
         self.walks = walks
-        fp = walks.fingerprints
+        fp, self.device_offsets_db = devices.rf_fingerprints(walks, cfg.calibrate_devices)
         self.rss = RssMatrix.from_fingerprints(fp, cfg.fill_dbm)
         self.meta = RowMeta(fp.node, walks.walk_of[fp.node], walks.step[fp.node], walks.t_s[fp.node],
                             walks.path[fp.node])
@@ -247,7 +248,8 @@ class WifiSource(EvidenceSource):
     def report(self) -> dict:
         across = self._used[1]
         return {"across_ratio": float(across), "estimated": bool(self.across_auto),
-                "estimated_from_pairs": self.across_n, "rf_model": self.rf.report()}
+                "estimated_from_pairs": self.across_n, "rf_model": self.rf.report(),
+                "device_offsets_db": {d: round(v, 2) for d, v in self.device_offsets_db.items()}}
 
 
 def is_parallel(rel: np.ndarray) -> np.ndarray:
