@@ -78,3 +78,5 @@ def test_second_phone_is_linked_after_calibration(two_phones):
     assert off.stats["vicinity"]["device_offsets_db"] == {}
     assert _cross_device_pairs(on) > 2 * max(_cross_device_pairs(off), 1)
     assert on.walks["linked"].sum() == 6
+    assert on.stats["vicinity"]["rss_exponent"] in (1.0, 1.25, 1.5, 2.0, 2.5)
+    assert max(on.stats["vicinity"]["rss_exponent_auc"].values()) > 0.8

@@ -60,6 +60,10 @@ class WifiConfig:
     # remove each device's RSS offset against the most common device (estimated from the data, reported
     # in optimize.json) before fingerprints are compared; off when all phones read alike.
     calibrate_devices: bool = True
+    # β of the powed representation fill + 80 dB·((rss − fill) / 80 dB)^β the fingerprints are compared in
+    # (strong readings weigh more as β grows); 0 = chosen per data set among 1-2.5 by how well it tells a
+    # walk's near scan pairs from its far ones; 1 = dBm as read (paper).
+    rss_exponent: float = bounded(0.0, 0.0, 5.0)
 
     def validate(self) -> None:
         check_ranges(self, "wifi.")

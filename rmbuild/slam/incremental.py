@@ -39,7 +39,7 @@ import pandas as pd
 from rmbuild import geometry
 from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.errors import InputError
-from rmbuild.slam import devices
+from rmbuild.slam import devices, powed
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import Links, RotationPriors, Ties
 from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, CompassSource
@@ -223,6 +223,7 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     """kNN growth of the free walks from the held ones (component 0, identity frames); then the walks left
     over joined along continuity ties (turned to the compass first) and, when some were, growth again."""
     fp, _ = devices.rf_fingerprints(mw, cfg.wifi.calibrate_devices)
+    fp, _, _ = powed.for_data(fp, mw, cfg.wifi.rss_exponent, cfg.wifi.fill_dbm, cfg.wifi.min_common_aps)
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]

@@ -81,7 +81,7 @@ def calibrate(rss: RssMatrix, walk_of_row: np.ndarray, own_xy: np.ndarray, path_
     Per fingerprint row: ``walk_of_row`` its walk, ``own_xy`` (n, 2) its position in its walk's own frame,
     ``path_m`` metres walked, ``t_s`` time. ``min_common``: APs a pair must share.
     """
-    ii, jj = _same_walk_pairs(walk_of_row, path_m, t_s)
+    ii, jj = same_walk_pairs(walk_of_row, path_m, t_s)
     if not len(ii):
         return RFModel(*FALLBACK)
     d = np.hypot(*(own_xy[ii] - own_xy[jj]).T)
@@ -99,7 +99,7 @@ def _mad(x: np.ndarray) -> float:
     return max(float(1.4826 * np.median(np.abs(x - np.median(x)))), 0.5)
 
 
-def _same_walk_pairs(walk_of_row: np.ndarray, path_m: np.ndarray, t_s: np.ndarray,
+def same_walk_pairs(walk_of_row: np.ndarray, path_m: np.ndarray, t_s: np.ndarray,
                      max_pairs_per_walk: int = 20000) -> tuple[np.ndarray, np.ndarray]:
     """Row pairs (i < j) of one walk, >= MIN_DT_S apart in time and <= MAX_PATH_M apart in walked path
     (a walk with many scans is subsampled to ``max_pairs_per_walk`` pairs, deterministically)."""
