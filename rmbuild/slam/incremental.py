@@ -140,8 +140,7 @@ def optimize_incremental(dataset: Dataset, fingerprints: Fingerprints, cfg: Opti
 
     t0 = time.perf_counter()
     ref = _reference(mw, prev, sp.held)
-    rf_report = (prev.report.get("vicinity") or {}).get("rf_model")
-    st, (lk, lq), ties, rot, prior, plog = _place(walks, mw, sp.held, ref, cfg, rf_report)
+    st, (lk, lq), ties, rot, prior, plog = _place(walks, mw, sp.held, ref, cfg, prev.report.get("vicinity") or {})
     placed = sp.free & (st.comp == 0)
     if progress:
         progress("init", {"linked": int((st.comp == 0).sum()), "walks": walks.n_walks})
@@ -219,16 +218,19 @@ def _rf_model(report: dict | None, walks: WalkSet, rss: RssMatrix, meta: RowMeta
                      cfg.wifi.min_common_aps)
 
 
-def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: OptimizeConfig, rf_report: dict | None):
+def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: OptimizeConfig, vicinity: dict):
     """kNN growth of the free walks from the held ones (component 0, identity frames); then the walks left
-    over joined along continuity ties (turned to the compass first) and, when some were, growth again."""
+    over joined along continuity ties (turned to the compass first) and, when some were, growth again.
+    ``vicinity``: the last optimize's report of the Wi-Fi evidence (its RF model and RSS exponent, which
+    the new walks are compared in too)."""
     fp, _ = devices.rf_fingerprints(mw, cfg.wifi.calibrate_devices)
-    fp, _, _ = powed.for_data(fp, mw, cfg.wifi.rss_exponent, cfg.wifi.fill_dbm, cfg.wifi.min_common_aps)
+    beta = cfg.wifi.rss_exponent or float(vicinity.get("rss_exponent", 0.0))
+    fp, _, _ = powed.for_data(fp, mw, beta, cfg.wifi.fill_dbm, cfg.wifi.min_common_aps)
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]
     locator = _Locator(rss, fp.node, free_window_median(rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
-    rf = _rf_model(rf_report, walks, rss, meta, free_rows, cfg)
+    rf = _rf_model(vicinity.get("rf_model"), walks, rss, meta, free_rows, cfg)
     ties = ContinuitySource(walks, cfg.continuity, rf, rss, fp.node).ties()
     rot = CompassSource(mw, cfg.compass).rotation_priors()
     prior = map_rotation_priors(rot, held)
