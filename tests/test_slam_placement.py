@@ -103,7 +103,7 @@ def test_window_lengths_cap_at_the_fit_window():
 
 def _merge_case(consistent: bool):
     """Reference walk 0 (comp 0) along y = 0; walks 1 and 2 (comp 1, placed against each other) each meet
-    it with 4 candidate pairs 3 m apart: too few for a walk alone (min_inliers_se2 = 6), enough pooled."""
+    it with 4 candidate pairs 3 m apart: too few for a walk alone (twice min_inliers: 6), enough pooled."""
     ref = np.c_[np.arange(0, 61.0), np.zeros(61), np.zeros(61)]
     own = np.c_[np.arange(0, 21.0), np.zeros(21), np.zeros(21)]
     walks = walk_set(np.vstack([ref, own, own]), np.repeat([0, 1, 2], [61, 21, 21]))

@@ -56,3 +56,12 @@ def test_too_few_pairs_keep_the_readings_as_read():
     few = ws.fingerprints.subset(ws.walk_of[ws.fingerprints.node] == 0)
     few = few.subset(np.arange(len(few)) < 15)  # 15 s of one walk: no pairs >= 10 s apart and 15 m away
     assert choose(few, ws, -110.0, 3) == (1.0, {})
+
+
+def test_a_small_gain_keeps_the_readings_as_read(monkeypatch):
+    import rmbuild.slam.powed as pw
+
+    ws = _line_walks(noisy_weak=True)
+    _, scores = choose(ws.fingerprints, ws, -110.0, 3)
+    monkeypatch.setattr(pw, "MIN_AUC_GAIN", max(scores.values()) - scores[1.0] + 1e-6)
+    assert choose(ws.fingerprints, ws, -110.0, 3) == (1.0, scores)

@@ -62,7 +62,7 @@ class WifiConfig:
     calibrate_devices: bool = True
     # β of the powed representation fill + 80 dB·((rss − fill) / 80 dB)^β the fingerprints are compared in
     # (strong readings weigh more as β grows); 0 = chosen per data set among 1-2.5 by how well it tells a
-    # walk's near scan pairs from its far ones; 1 = dBm as read (paper).
+    # walk's near scan pairs from its far ones (1 unless another is clearly better); 1 = dBm as read (paper).
     rss_exponent: float = bounded(0.0, 0.0, 5.0)
 
     def validate(self) -> None:
@@ -75,8 +75,6 @@ class WifiConfig:
 class CompassConfig:
     # use the phone's absolute heading (poses column yaw_abs_rad) for walk rotations and heading priors.
     use: bool = True
-    # steps; a heading prior on every n-th step of the joint solve (0 = none).
-    prior_every_n: int = bounded(10, 0, 10000)
     # rad; 1-sigma of yaw_abs where the poses table gives none (yaw_abs_sigma_rad).
     default_sigma_rad: float = bounded(0.25, 0.001, math.pi)
 
@@ -128,9 +126,8 @@ class PlacementConfig:
     method: Literal["grow", "origin"] = "grow"
     # m; a correspondence is an inlier of a placement when it puts its two nodes this close.
     gate_m: float = bounded(4.0, 0.1, 100.0)
-    # distinct inlier scans a placement needs: with the compass rotation / with a fitted rotation.
+    # distinct inlier scans a placement with the compass rotation needs (with a fitted rotation: twice).
     min_inliers: int = bounded(3, 1, 10000)
-    min_inliers_se2: int = bounded(6, 2, 10000)
     # m of walked path the inliers must cover: with the compass rotation / with a fitted rotation.
     min_shared_m: float = bounded(6.0, 0.0, 10000.0)
     min_shared_se2_m: float = bounded(20.0, 0.0, 10000.0)
@@ -188,7 +185,7 @@ def paper_config(**overrides) -> OptimizeConfig:
     cfg = OptimizeConfig(
         odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0, estimate_scale=False),
         wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, omega=1.0, across_ratio=1.0),
-        compass=CompassConfig(use=False, prior_every_n=0),
+        compass=CompassConfig(use=False),
         continuity=ContinuityConfig(use=False),
         placement=PlacementConfig(method="origin"),
         # one node per step, as published (with the paper's weak odometry the composed keyframe factors

@@ -42,7 +42,7 @@ from rmbuild.errors import InputError
 from rmbuild.slam import devices, powed
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import Links, RotationPriors, Ties
-from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, CompassSource
+from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, HEADING_PRIOR_EVERY_N, CompassSource
 from rmbuild.slam.evidence.continuity import JOIN_CAUCHY_K, ContinuitySource
 from rmbuild.slam.factors import X, fuzzy_error, poses_to_values, values_to_poses, vicinity_factor, vicinity_noise
 from rmbuild.slam.pairs import RowMeta, window_median
@@ -417,10 +417,10 @@ def _add_priors(graph: gtsam.NonlinearFactorGraph, mw: WalkSet, xyt0: np.ndarray
 
 
 def _heading_nodes(mw: WalkSet, walks: np.ndarray, cfg: OptimizeConfig) -> np.ndarray:
-    """The nodes of ``walks`` that get a compass heading prior (every prior_every_n-th with a yaw)."""
-    if cfg.compass.prior_every_n <= 0 or not cfg.compass.use:
+    """The nodes of ``walks`` that get a compass heading prior (every HEADING_PRIOR_EVERY_N-th with a yaw)."""
+    if not cfg.compass.use:
         return np.zeros(0, np.int64)
-    idx = [np.arange(mw.starts[w], mw.ends[w], cfg.compass.prior_every_n) for w in np.flatnonzero(walks)]
+    idx = [np.arange(mw.starts[w], mw.ends[w], HEADING_PRIOR_EVERY_N) for w in np.flatnonzero(walks)]
     nodes = np.concatenate(idx) if idx else np.zeros(0, np.int64)
     return nodes[np.isfinite(mw.yaw_abs[nodes])].astype(np.int64)
 

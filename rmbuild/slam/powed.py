@@ -6,8 +6,8 @@ weigh more than the weak ones near the detection floor. Which β suits a venue d
 MS ILC floors and IPIN 2023 the best one ranges from 1 (as read) to 2. rmbuild chooses it per data set
 with the ruler of the RF model (``rfmodel.py``) — pairs of scans of one walk whose separation the walk's
 own dead reckoning knows: the β whose RSS distance best tells *near* pairs from *far* ones (area under the
-ROC curve) is used. Values are mapped back onto a dBm-like scale (``fill + range · x**β``), so the RF model
-and the gates keep their units.
+ROC curve) is used when it does so clearly better than the readings as read. Values are mapped back onto
+a dBm-like scale (``fill + range · x**β``), so the RF model and the gates keep their units.
 """
 
 from __future__ import annotations
@@ -25,6 +25,9 @@ RANGE_DB = 80.0
 CANDIDATES = (1.0, 1.25, 1.5, 2.0, 2.5)
 # same-walk pairs the choice is made on at most (a deterministic subsample beyond)
 MAX_PAIRS = 200_000
+# AUC a β must gain over the readings as read (β = 1) to be used: smaller gains did not carry over to the
+# placed map (docs/optimize.md, step 1)
+MIN_AUC_GAIN = 0.03
 # pairs each class (near, far) needs; with fewer the readings are used as read (β = 1)
 MIN_PAIRS = 30
 
@@ -52,7 +55,8 @@ def auc(near: np.ndarray, far: np.ndarray) -> float:
 
 def choose(fp: Fingerprints, walks: WalkSet, fill_dbm: float, min_common: int) -> tuple[float, dict[float, float]]:
     """The candidate β whose RSS distance separates one walk's near scan pairs (< NEAR_M by its dead
-    reckoning) from its far ones (FAR_M) best, and each candidate's AUC ({} when too few pairs)."""
+    reckoning) from its far ones (FAR_M) best — 1 unless it gains MIN_AUC_GAIN over it —, and each
+    candidate's AUC ({} when too few pairs)."""
     node = fp.node
     ii, jj = same_walk_pairs(walks.walk_of[node], walks.path[node], walks.t_s[node])
     if len(ii) > MAX_PAIRS:
@@ -67,7 +71,8 @@ def choose(fp: Fingerprints, walks: WalkSet, fill_dbm: float, min_common: int) -
         if (ok & near).sum() < MIN_PAIRS or (ok & far).sum() < MIN_PAIRS:
             return 1.0, {}
         scores[beta] = auc(r[ok & near], r[ok & far])
-    return max(scores, key=lambda b: scores[b]), scores
+    best = max(scores, key=lambda b: scores[b])
+    return (best if scores[best] >= scores[1.0] + MIN_AUC_GAIN else 1.0), scores
 
 
 def for_data(fp: Fingerprints, walks: WalkSet, exponent: float, fill_dbm: float,

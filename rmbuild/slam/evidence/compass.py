@@ -27,6 +27,8 @@ ABS_HEADING_SIGMA_RAD = 0.02
 # Cauchy kernel width (sigmas) of each heading prior: a local disturbance (steel, escalators) far beyond
 # the reported sigma bends the walk less (docs/optimize.md: six synthetic seeds 1.64 -> 1.38 m)
 HEADING_PRIOR_CAUCHY_K = 1.0
+# steps; a heading prior on every n-th step of a walk with a compass in the joint solve
+HEADING_PRIOR_EVERY_N = 10
 
 
 class CompassSource(EvidenceSource):
@@ -47,7 +49,7 @@ class CompassSource(EvidenceSource):
 
     def fixes_rotation(self, placement) -> bool:
         """Whether the heading priors fix the map's rotation (the reference walk has a trusted compass)."""
-        return self.cfg.prior_every_n > 0 and bool(placement.heading_known[placement.reference])
+        return self.cfg.use and bool(placement.heading_known[placement.reference])
 
     def static_factors(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> StaticFactors:
         """Per-step rotation priors (yaw_abs minus the map frame's compass rotation)."""
@@ -57,7 +59,7 @@ class CompassSource(EvidenceSource):
         world_rot = self.priors.theta[placement.reference] - placement.frame_rotation
         nodes = []
         for w in np.flatnonzero(placement.heading_known):
-            idx = np.arange(walks.starts[w], walks.ends[w], self.cfg.prior_every_n)
+            idx = np.arange(walks.starts[w], walks.ends[w], HEADING_PRIOR_EVERY_N)
             idx = idx[np.isfinite(walks.yaw_abs[idx])]
             nodes.append(idx)
             for i in idx.tolist():

@@ -110,7 +110,7 @@ def accept_pairs_fit(f: WalkFit | None, se2: bool, cfg: PlacementConfig) -> bool
     """A pairs fit: enough distinct inliers and shared path, leading the best placement elsewhere."""
     if f is None:
         return False
-    min_inl = cfg.min_inliers_se2 if se2 else cfg.min_inliers
+    min_inl = 2 * cfg.min_inliers if se2 else cfg.min_inliers
     return bool(f.score >= min_inl and f.shared_m >= _min_path(cfg, se2) and f.score >= cfg.margin * f.second
                 and f.score >= f.second + cfg.min_lead)
 
@@ -119,6 +119,6 @@ def accept_scans_fit(f: WalkFit | None, se2: bool, cfg: PlacementConfig) -> bool
     """A localised-scans fit: enough inliers, shared path and share of the covered scans."""
     if f is None:
         return False
-    min_inl = cfg.min_inliers_se2 if se2 else cfg.min_inliers
+    min_inl = 2 * cfg.min_inliers if se2 else cfg.min_inliers
     return bool(f.score >= min_inl and f.shared_m >= _min_path(cfg, se2)
                 and f.score >= KNN_MIN_INLIER_FRAC * (f.score + f.second))
