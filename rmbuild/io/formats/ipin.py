@@ -52,7 +52,7 @@ MAX_LINE_CHARS = 4096
 _NAME_SUFFIXES = (".txt", ".txt.gz", ".log", ".log.gz", ".csv", ".csv.gz")
 #: our own schema's file names; never a logfile
 _SCHEMA_NAMES = re.compile(
-    r"^(walks|poses|wifi|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
+    r"^(walks|poses|wifi|ble|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
 
 def wgs84_to_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float, lon0_deg: float,
                  ) -> tuple[np.ndarray, np.ndarray]:

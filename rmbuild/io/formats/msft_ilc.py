@@ -16,7 +16,7 @@ import json
 import re
 import zlib
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -135,8 +135,8 @@ class _Trace:
     n_wifi_stale: int
     n_wifi_dup: int = 0
     site: str = ""  # the header's SiteID (one building)
-    ble: pd.DataFrame | None = None
-    ble_lines: np.ndarray | None = None
+    ble: pd.DataFrame = field(default_factory=pd.DataFrame)   # BLE readings (TYPE_BEACON)
+    ble_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     n_ble_dup: int = 0
 
 
@@ -497,7 +497,7 @@ class MsftIlcReader(Reader):
             imu[tr.walk_id] = raw_imu(tr, f)
             wifi.append(tr.wifi)
             wifi_lines.append(tr.wifi_lines)
-            if tr.ble is not None and len(tr.ble):
+            if len(tr.ble):
                 ble.append(tr.ble)
                 ble_lines.append(tr.ble_lines)
                 n_ble_dup += tr.n_ble_dup
