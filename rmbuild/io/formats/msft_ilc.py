@@ -174,6 +174,13 @@ def _numeric(table: np.ndarray, linenos: np.ndarray, path: Path, what: str, dtyp
         raise  # pragma: no cover - the loop always finds the culprit
 
 
+def _gather(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> bytes:
+    """The bytes ``buf[start[i]:end[i]]`` of every i, concatenated (one gather over those bytes only)."""
+    n = end - start
+    idx = np.arange(int(n.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(n) - n), n)
+    return buf[idx].tobytes()
+
+
 def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
     """Vectorised parse of a well-formed trace; None when anything looks off (the slow path then finds and
     reports the problem with its line number).
@@ -226,12 +233,6 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
         names.append(b[: b.index(b"\t")].decode("ascii", "replace") if b"\t" in b else None)
     if any(n is None for n in names):
         return None
-    # per byte: the code of its line's type (1 + index into _USED; 0 = unused / comment)
-    used = list(_USED)
-    code_of_uniq = np.array([used.index(n) + 1 if n in _USED else 0 for n in names], dtype=np.uint8)
-    line_code = np.zeros(len(starts), dtype=np.uint8)
-    line_code[line_no - 1] = code_of_uniq[inv.ravel()]
-    byte_code = np.repeat(line_code, ends - starts + 1)
     out: dict[str, _Rows] = {}
     skipped: Counter = Counter()
     for j, name in enumerate(names):
@@ -246,7 +247,7 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
                              np.zeros((0, len(text_cols)), dtype=object), line)
             continue
-        block = buf[byte_code == used.index(typ) + 1].tobytes()
+        block = _gather(buf, ds[sel], de[sel] + 1)
         try:
             df = pd.read_csv(io.BytesIO(block), sep="\t", header=None, names=list(range(nfields)),
                              dtype={c: str for c in text_cols}, keep_default_na=False, na_values={},
