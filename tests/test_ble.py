@@ -292,3 +292,36 @@ def test_real_ilc_site_split_keeps_ble_per_floor(shared_datasets: Path, tmp_path
     for f in floors.values():
         if f.ble is not None and len(f.ble):
             assert set(f.ble["walk_id"]) <= set(f.walks["walk_id"])
+
+
+# --- simulate: beacons of their own ---------------------------------------------------------------------
+
+def test_simulated_beacons_peak_where_they_are(tmp_path, capsys):
+    """`simulate` with [simulate.ble] n_beacons writes ble.csv and truth/beacons.csv without changing any
+    other table; a map of the ingested readings at the true positions peaks within a cell or two of each
+    beacon."""
+    from rmbuild.radiomap import build_radio_map
+
+    (tmp_path / "ble.toml").write_text("[simulate.ble]\nn_beacons = 5\n")
+    for out, extra in (("plain", []), ("ble", ["--config", tmp_path / "ble.toml"])):
+        r = run_cli(capsys, "simulate", tmp_path / out, "--preset", "tiny", "--seed", "3", "-q", *extra)
+        assert r.code == 0, r.err
+    for name in ("wifi.csv", "poses.csv", "fixes.csv", "walks.csv", "truth/poses.csv", "truth/aps.csv"):
+        assert (tmp_path / "plain" / name).read_bytes() == (tmp_path / "ble" / name).read_bytes(), name
+    assert not (tmp_path / "plain" / "ble.csv").exists()
+    assert run_cli(capsys, "ingest", tmp_path / "ble", "-w", tmp_path / "ws", "-q").code == 0
+    ds = Workspace.open(tmp_path / "ws").read_dataset()
+    beacons = ds.extra["truth"]["beacons"]
+    assert ds.ble is not None and len(beacons) == 5 and set(ds.ble["bssid"]) <= set(beacons["bssid"])
+    truth_xy = ds.truth_poses[["x_m", "y_m"]].to_numpy()
+    rm = build_radio_map(ds.ble, truth_xy, ds.poses["walk_id"].astype(str).to_numpy())
+    long = rm.long_table()
+    long = long[long["count"] >= 2]
+    for _, b in beacons.iterrows():
+        g = long[long["bssid"] == b["bssid"]]
+        d = np.hypot(g["x_m"] - b["x_m"], g["y_m"] - b["y_m"]).to_numpy()
+        top = int(np.argmax(g["rssi_mean_dbm"].to_numpy()))
+        # the loudest cell is (nearly) the nearest cell the walks passed through
+        assert d[top] < d.min() + 3.0, (b["bssid"], d[top], d.min())
+        expect = -59.0 - 30.0 * np.log10(max(d[top], 1.0))
+        assert abs(g["rssi_mean_dbm"].iat[top] - expect) < 8.0

@@ -99,6 +99,7 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_devices": "data/truth/devices.parquet",
     "data.truth_users": "data/truth/users.parquet",
     "data.truth_landmarks": "data/truth/landmarks.parquet",
+    "data.truth_beacons": "data/truth/beacons.parquet",
     "data.floorplan": "data/floorplan.geojson",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
@@ -502,7 +503,8 @@ class Workspace:
         venue = self.read_json("data.venue") if self.exists("data.venue") else None
         truth_extra = {
             k.removeprefix("data.truth_"): self.read_table(k)
-            for k in ("data.truth_walks", "data.truth_devices", "data.truth_users", "data.truth_landmarks")
+            for k in ("data.truth_walks", "data.truth_devices", "data.truth_users", "data.truth_landmarks",
+                      "data.truth_beacons")
             if self.exists(k)
         }
         return Dataset(

@@ -2,7 +2,7 @@
 
 Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``ble*``, ``fixes*`` (``.csv``, ``.csv.gz``
 or ``.parquet``), and inside a ``truth/`` folder ``poses*``, ``aps*``, ``walks*``, ``devices*``, ``users*``,
-``landmarks*`` and ``venue.json``. Several files of one table are concatenated.
+``landmarks*``, ``beacons*`` and ``venue.json``. Several files of one table are concatenated.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "ble", "fixes", "imu")
-TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes")
+TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes", "beacons")
 SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
 # column -> kind ("str" | "num"); required and optional columns per table
