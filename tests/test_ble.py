@@ -325,3 +325,21 @@ def test_simulated_beacons_peak_where_they_are(tmp_path, capsys):
         assert d[top] < d.min() + 3.0, (b["bssid"], d[top], d.min())
         expect = -59.0 - 30.0 * np.log10(max(d[top], 1.0))
         assert abs(g["rssi_mean_dbm"].iat[top] - expect) < 8.0
+
+
+def test_append_keeps_ble_readings_on_their_nodes(tmp_path, capsys):
+    """Ingesting walk0 then appending walk1 gives the BLE table of ingesting both at once."""
+    rows = [("walk0", 0.7, "b1", -70.0), ("walk0", 3.1, "b2", -65.0), ("walk1", 100.2, "b1", -75.0),
+            ("walk1", 104.0, "b2", -61.0)]
+    tables = _tables_with_ble(rows)
+    parts = {}
+    for w in ("walk0", "walk1"):
+        parts[w] = write_tables({k: v[v["walk_id"] == w] for k, v in tables.items()}, tmp_path / w)
+    assert run_cli(capsys, "ingest", parts["walk0"], "-w", tmp_path / "ws", "-q").code == 0
+    assert run_cli(capsys, "ingest", parts["walk1"], "-w", tmp_path / "ws", "--append", "-q").code == 0
+    assert run_cli(capsys, "ingest", write_tables(tables, tmp_path / "all"), "-w", tmp_path / "ws_all", "-q").code == 0
+    appended = Workspace.open(tmp_path / "ws").read_dataset().ble
+    whole = Workspace.open(tmp_path / "ws_all").read_dataset().ble
+    assert appended is not None and whole is not None
+    pd.testing.assert_frame_equal(appended, whole)
+    assert json.loads((tmp_path / "ws" / "data" / "report.json").read_text())["ble"]["readings"] == 4
