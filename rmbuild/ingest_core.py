@@ -1,4 +1,5 @@
-"""Shared validation of read input, and attachment of Wi-Fi readings to pose nodes (docs/data-format.md).
+"""Shared validation of read input, and attachment of Wi-Fi (and BLE) readings to pose nodes
+(docs/data-format.md).
 
 Pure: takes a :class:`RawInput` from any reader, returns the :class:`Dataset`, the per-node
 :class:`Fingerprints` and a summary dict. Every problem is an :class:`InputError` naming file and row.
@@ -19,7 +20,15 @@ from rmbuild.geometry import wrap
 from rmbuild.ingest_checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
-from rmbuild.types import FIX_COLUMNS, POSE_COLUMNS, WALK_COLUMNS, WIFI_COLUMNS, Dataset, Fingerprints
+from rmbuild.types import (
+    BLE_COLUMNS,
+    FIX_COLUMNS,
+    POSE_COLUMNS,
+    WALK_COLUMNS,
+    WIFI_COLUMNS,
+    Dataset,
+    Fingerprints,
+)
 
 #: columns ingest adds to the walks table for walks whose poses come from the phone PDR (empty / NaN for
 #: the others): steps, walking time (s), cadence (steps per walking second), walked length (m), heading
@@ -80,24 +89,61 @@ def _check_time_order(df: pd.DataFrame, where: Callable[[int], str], strict: boo
     return codes, pd.Index(names)
 
 
-def _merge_duplicate_readings(raw: RawInput) -> None:
-    """Keep the first of repeated (walk, t_s, bssid) readings, for formats that allow them."""
-    dup = raw.wifi.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
+def _merge_duplicate_readings(raw: RawInput, table: str = "wifi") -> None:
+    """Keep the first of repeated (walk, t_s, bssid) readings of ``table`` ("wifi" or "ble"), for formats that
+    allow them."""
+    df = getattr(raw, table)
+    dup = df.duplicated(subset=["walk_id", "t_s", "bssid"]).to_numpy()
     if not dup.any():
         return
     kept = np.flatnonzero(~dup)
-    raw.wifi = raw.wifi.iloc[kept].reset_index(drop=True)
-    orig = raw.where.get("wifi")
+    setattr(raw, table, df.iloc[kept].reset_index(drop=True))
+    orig = raw.where.get(table)
     if orig is not None:
-        raw.where["wifi"] = lambda i: orig(int(kept[i]))
-    raw.notes.append(f"merged {int(dup.sum()):,} Wi-Fi readings repeating a BSSID within one scan (first kept)")
+        raw.where[table] = lambda i: orig(int(kept[i]))
+    what = "Wi-Fi readings repeating a BSSID" if table == "wifi" else "BLE readings repeating a beacon"
+    raw.notes.append(f"merged {int(dup.sum()):,} {what} within one scan (first kept)")
+
+
+def _check_readings(df: pd.DataFrame, where: Callable[[int], str], cfg: IngestConfig, table: str,
+                    pose_walks: set) -> tuple[np.ndarray, pd.Index]:
+    """The checks of one readings table (``table``: "wifi" or "ble"): RSSI range, finite times not going
+    backwards within a walk, no repeated (walk, t_s, bssid), no walk without poses. Returns its walk codes and
+    ids (``pd.factorize``)."""
+    label, pre = ("Wi-Fi", "") if table == "wifi" else ("BLE", "ble: ")
+    rssi = df["rssi_dbm"].to_numpy(dtype=np.float64)
+    bad = ~np.isfinite(rssi) | (rssi < cfg.rssi_min_dbm) | (rssi > cfg.rssi_max_dbm)
+    if bad.any():
+        i = _first(bad)
+        raise InputError(
+            f"{pre}rssi_dbm {_v(rssi[i])} outside [{cfg.rssi_min_dbm:g}, {cfg.rssi_max_dbm:g}] dBm", where(i)
+        )
+    if not np.isfinite(df["t_s"].to_numpy(dtype=np.float64)).all():
+        raise InputError(f"{table}: t_s is NaN or infinite", where(_first(~np.isfinite(df["t_s"].to_numpy()))))
+    codes, walk_ids = _check_time_order(df, where, strict=False, what=table)
+    i = _first_repeated_reading(df, codes)
+    if i >= 0:
+        raise InputError(
+            f"duplicate {'' if table == 'wifi' else 'BLE '}reading (walk {_v(df['walk_id'].iloc[i])}, "
+            f"t_s={_v(df['t_s'].iloc[i])}, "
+            f"bssid {_v(df['bssid'].iloc[i])})",
+            where(i),
+        )
+    orphan = ~walk_ids.isin(pose_walks)[codes]
+    if orphan.any():
+        i = _first(orphan)
+        raise InputError(f"{label} reading of walk {_v(df['walk_id'].iloc[i])}, which has no poses", where(i))
+    return codes, walk_ids
 
 
 def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd.Index]]:
     """Checks shared by every format (types and columns were checked by the reader). Returns the walk codes
-    and walk ids of ``raw.poses`` and ``raw.wifi`` rows (``pd.factorize``), for the ordering that follows."""
+    and walk ids of ``raw.poses``, ``raw.wifi`` (and ``raw.ble``) rows (``pd.factorize``), for the ordering that
+    follows."""
     if raw.merge_duplicate_readings:
         _merge_duplicate_readings(raw)
+        if raw.ble is not None:
+            _merge_duplicate_readings(raw, "ble")
     poses, wifi, fixes = raw.poses, raw.wifi, raw.fixes
     wp, ww, wf = _where(raw, "poses"), _where(raw, "wifi"), _where(raw, "fixes")
     if len(poses) == 0:
@@ -111,28 +157,10 @@ def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd
             raise InputError(f"poses: {c} is NaN or infinite", wp(_first(~np.isfinite(v))))
     pose_codes, pose_walk_ids = _check_time_order(poses, wp, strict=True, what="poses")
 
-    rssi = wifi["rssi_dbm"].to_numpy(dtype=np.float64)
-    bad = ~np.isfinite(rssi) | (rssi < cfg.rssi_min_dbm) | (rssi > cfg.rssi_max_dbm)
-    if bad.any():
-        i = _first(bad)
-        raise InputError(
-            f"rssi_dbm {_v(rssi[i])} outside [{cfg.rssi_min_dbm:g}, {cfg.rssi_max_dbm:g}] dBm", ww(i)
-        )
-    if not np.isfinite(wifi["t_s"].to_numpy(dtype=np.float64)).all():
-        raise InputError("wifi: t_s is NaN or infinite", ww(_first(~np.isfinite(wifi["t_s"].to_numpy()))))
-    wifi_codes, wifi_walk_ids = _check_time_order(wifi, ww, strict=False, what="wifi")
-    i = _first_repeated_reading(wifi, wifi_codes)
-    if i >= 0:
-        raise InputError(
-            f"duplicate reading (walk {_v(wifi['walk_id'].iloc[i])}, t_s={_v(wifi['t_s'].iloc[i])}, "
-            f"bssid {_v(wifi['bssid'].iloc[i])})",
-            ww(i),
-        )
     pose_walks = set(pose_walk_ids)
-    orphan = ~wifi_walk_ids.isin(pose_walks)[wifi_codes]
-    if orphan.any():
-        i = _first(orphan)
-        raise InputError(f"Wi-Fi reading of walk {_v(wifi['walk_id'].iloc[i])}, which has no poses", ww(i))
+    codes = {"poses": (pose_codes, pose_walk_ids), "wifi": _check_readings(wifi, ww, cfg, "wifi", pose_walks)}
+    if raw.ble is not None and len(raw.ble):
+        codes["ble"] = _check_readings(raw.ble, _where(raw, "ble"), cfg, "ble", pose_walks)
     if len(fixes):
         orphan = ~fixes["walk_id"].isin(pose_walks).to_numpy()
         if orphan.any():
@@ -151,7 +179,7 @@ def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd
         wid = sorted(missing)[0]
         raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
                          wp(_first((poses["walk_id"] == wid).to_numpy())))
-    return {"poses": (pose_codes, pose_walk_ids), "wifi": (wifi_codes, wifi_walk_ids)}
+    return codes
 
 
 def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
@@ -399,9 +427,10 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
         pdr_warnings += wifi_motion_check(poses, all_readings, reports, {w: imu.source for w, imu in raw.imu.items()})
         walks = _pdr_columns(walks, reports)
 
+    ble, ble_summary = _attach_ble(raw, poses, pose_walk, walk_index, codes, cfg)
     ds = Dataset(
         walks=walks, poses=poses, wifi=wifi, fixes=fixes, truth_poses=truth, truth_aps=raw.truth_aps,
-        venue=raw.venue, extra={"truth": dict(raw.truth_extra)},
+        venue=raw.venue, extra={"truth": dict(raw.truth_extra)}, ble=ble,
     )
     fp = Fingerprints.from_readings(wifi)
     scan = scan_ids(wifi_walk, wifi["t_s"].to_numpy(np.float64))
@@ -423,6 +452,12 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     }
     if reports:
         summary["pdr"] = _pdr_summary(reports)
+    if ble_summary:
+        summary["ble"] = ble_summary
+        if ble_summary["readings_dropped_outside_walk"]:
+            summary["warnings"].append(
+                f"{ble_summary['readings_dropped_outside_walk']} BLE reading(s) more than {cfg.max_attach_gap_s:g} s "
+                "outside their walk's poses were not attached")
     no_wifi = sorted(str(w) for w in walk_index[np.bincount(wifi_walk, minlength=len(walk_index)) == 0])
     if no_wifi:
         summary["warnings"].append(
@@ -438,6 +473,25 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
             "were not attached"
         )
     return ds, fp, summary
+
+
+def _attach_ble(raw: RawInput, poses: pd.DataFrame, pose_walk: np.ndarray, walk_index: pd.Index,
+                codes: dict[str, tuple[np.ndarray, pd.Index]], cfg: IngestConfig) -> tuple[pd.DataFrame | None, dict]:
+    """The BLE readings (:data:`BLE_COLUMNS`) attached to nodes exactly as the Wi-Fi ones, and their summary
+    (readings, beacons, readings not attached); (None, {}) when the input has none."""
+    if raw.ble is None or not len(raw.ble):
+        return None, {}
+    ble = raw.ble
+    for c, v in (("freq_mhz", np.nan), ("ssid", "")):
+        if c not in ble.columns:
+            ble = ble.assign(**{c: v})
+    ble, ble_walk = _order_by_walk(ble, walk_index, codes["ble"])
+    ble["node"] = attach(poses, pose_walk, ble, ble_walk, cfg)
+    attached = ble["node"].to_numpy() >= 0
+    out = ble[list(BLE_COLUMNS)][attached].reset_index(drop=True)
+    out["rssi_dbm"] = out["rssi_dbm"].astype(np.float32)
+    return out, {"readings": len(out), "beacons": int(out["bssid"].nunique()),
+                 "readings_dropped_outside_walk": int((~attached).sum())}
 
 
 def _order_by_walk(df: pd.DataFrame, walk_index: pd.Index, codes: tuple[np.ndarray, pd.Index]

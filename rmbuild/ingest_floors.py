@@ -162,7 +162,7 @@ def _floor_input(raw: RawInput, floor: str, segs: list[tuple[str, tuple[str, flo
     """The part of ``raw`` on one floor: its walks' segments, with ``where`` still naming the input rows."""
     where: dict[str, Callable[[int], str]] = {}
     tables: dict[str, pd.DataFrame] = {}
-    for name in ("walks", "poses", "wifi", "fixes", "truth_poses"):
+    for name in ("walks", "poses", "wifi", "ble", "fixes", "truth_poses"):
         df = getattr(raw, name)
         if df is None:
             continue
@@ -176,7 +176,8 @@ def _floor_input(raw: RawInput, floor: str, segs: list[tuple[str, tuple[str, flo
     imu = {s[0]: _imu_part(raw.imu[w], s[1], s[2]) for w, s in segs if w in raw.imu}
     extra = {k: _truth_part(v, floor, own) for k, v in raw.truth_extra.items()}
     aps = _truth_part(raw.truth_aps, floor, own) if raw.truth_aps is not None else None
-    return replace(raw, walks=tables["walks"], poses=tables["poses"], wifi=tables["wifi"], fixes=tables["fixes"],
+    return replace(raw, walks=tables["walks"], poses=tables["poses"], wifi=tables["wifi"], ble=tables.get("ble"),
+                   fixes=tables["fixes"],
                    truth_poses=tables.get("truth_poses"), truth_extra=extra, truth_aps=aps, where=where,
                    imu=imu, skipped={}, notes=[], transitions=[],
                    floorplan=raw.floorplans.get(floor) if raw.floorplans else raw.floorplan, floorplans={})

@@ -23,6 +23,9 @@ POSE_COLUMNS = (
 )
 #: Wi-Fi readings; ``node`` = the pose node the reading is attached to (docs/data-format.md).
 WIFI_COLUMNS = ("walk_id", "t_s", "bssid", "rssi_dbm", "freq_mhz", "ssid", "node")
+#: BLE beacon readings: the Wi-Fi columns, ``bssid`` holding the beacon id (its MAC address) and ``ssid`` its
+#: iBeacon identity ``uuid:major:minor`` ("" when unknown); ``freq_mhz`` NaN (docs/data-format.md).
+BLE_COLUMNS = WIFI_COLUMNS
 #: Ground-truth position fixes (landmarks / waypoints), building frame.
 FIX_COLUMNS = ("walk_id", "t_s", "x_m", "y_m", "label")
 #: True poses per step (synthetic data only), building frame.
@@ -36,11 +39,13 @@ BUILDING_FRAME_GAUGES = ("anchors", "floorplan")
 
 @dataclass
 class Dataset:
-    """Everything ingest produces: walks, their poses, attached Wi-Fi readings and ground truth.
+    """Everything ingest produces: walks, their poses, attached Wi-Fi (and BLE) readings and ground truth.
 
     ``poses`` is sorted by walk (in ``walks`` order) then step, with a RangeIndex: row i is node i.
     ``truth_poses`` (same row order as ``poses`` when present) and ``truth_aps`` exist for synthetic data.
     ``venue`` is an optional JSON-able description of the floor plan (walls as segments, bounds).
+    ``ble``: BLE beacon readings with :data:`BLE_COLUMNS` attached to nodes like ``wifi``; None when the input
+    had none.
     """
 
     walks: pd.DataFrame
@@ -51,6 +56,7 @@ class Dataset:
     truth_aps: pd.DataFrame | None = None
     venue: dict | None = None
     extra: dict = field(default_factory=dict)
+    ble: pd.DataFrame | None = None
 
     @property
     def n_nodes(self) -> int:

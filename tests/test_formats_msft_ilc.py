@@ -71,7 +71,7 @@ def test_fixture_reads():
     assert any("dropped 4 of 20 Wi-Fi rows" in n for n in raw.notes)
     # waypoints are ground truth fixes in the floor frame
     assert list(raw.fixes["x_m"]) == [50.0, 55.0, 55.0] and list(raw.fixes["floor"]) == ["F1"] * 3
-    assert raw.skipped == {"TYPE_ACCELEROMETER_UNCALIBRATED": 60, "TYPE_BEACON": 1, "TYPE_BLUE": 24}
+    assert raw.skipped == {"TYPE_ACCELEROMETER_UNCALIBRATED": 60, "TYPE_BLUE": 24}   # TYPE_BEACON: BLE readings
     where = raw.where["wifi"](0)
     assert where.startswith(str(FIXTURE)) and int(where.rsplit(":", 1)[1]) > 4
 
@@ -240,7 +240,7 @@ def test_real_site2_f4_pdr_against_waypoints():
     assert time.perf_counter() - t < 40
     assert raw.walks["device_id"].eq("PBCM10").all()
     assert len(raw.fixes) == 193
-    assert "TYPE_BEACON" in raw.skipped
+    assert "TYPE_BEACON" not in raw.skipped and raw.ble is not None and len(raw.ble) > 0
     # walked distance / waypoint path length between the first and last waypoint, per walk
     ratios = []
     for wid, fx in raw.fixes.groupby("walk_id"):

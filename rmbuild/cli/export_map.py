@@ -42,6 +42,11 @@ def export_map(workspace, anchors_path, cell_size_m, floor, rerun, config_path, 
 def _summary(r: dict, where) -> None:
     click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
                f"{r['reference_nodes']} reference nodes, {_frame(r['frame'])} -> {where}")
+    ble = r.get("ble")
+    if ble and "skipped" in ble:
+        click.echo(f"note: no BLE radio map: {ble['skipped']}", err=True)
+    elif ble:
+        click.echo(f"BLE radio map: {ble['cells']} cells, {ble['beacons']} beacons -> {where / 'radiomap_ble.parquet'}")
     left = r["frame_info"].get("left_out_walks") or []
     if left:
         click.echo(f"note: {len(left)} walk(s) placed neither by Wi-Fi links nor by anchors were left out: "

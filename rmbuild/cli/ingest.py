@@ -68,7 +68,12 @@ def ingest(inputs, workspace, fmt, floorplan, append, rerun, config_path, force,
 
 def _line(s: dict) -> str:
     return (f"ingested {s['walks']} walks, {s['poses']} poses, {s['readings']} readings in {s['scans']} scans "
-            f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes)" + _skipped(s, "; "))
+            f"({s['aps']} APs, {s['nodes_with_fingerprint']} fingerprinted nodes)" + _ble(s) + _skipped(s, "; "))
+
+
+def _ble(s: dict) -> str:
+    b = s.get("ble")
+    return f"; {b['readings']} BLE readings of {b['beacons']} beacons" if b else ""
 
 
 def _skipped(s: dict, sep: str = "") -> str:

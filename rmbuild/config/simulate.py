@@ -322,6 +322,27 @@ class BuildingConfig:
 
 
 @dataclass(frozen=True)
+class BleConfig:
+    """BLE beacons, a second radio modality written as ``ble`` (rmbuild/synthetic/ble.py); none by default."""
+
+    # count; beacons, each at a navigation node of the floor (0 = no BLE readings; one floor only).
+    n_beacons: int = bounded(0, 0, 1000)
+    # dBm; mean RSSI at 1 m (an iBeacon's "measured power").
+    rssi_at_1m_dbm: float = bounded(-59.0, -100.0, 0.0)
+    # 1; path-loss exponent n in RSS = P1 - 10 n log10(d / 1 m): beacons fade faster than Wi-Fi (2.2-3.3).
+    path_loss_exp: float = bounded(3.0, 1.5, 6.0)
+    # dB; sigma of the independent per-reading noise.
+    noise_sigma_db: float = bounded(3.0, 0.0, 20.0)
+    # s; a phone reports each beacon it hears once per period (its phase drawn per walk and beacon).
+    period_s: float = bounded(1.0, 0.1, 60.0)
+    # dBm; readings below it are never reported.
+    detect_floor_dbm: float = bounded(-95.0, -130.0, -30.0)
+
+    def validate(self) -> None:
+        check_ranges(self, "ble.")
+
+
+@dataclass(frozen=True)
 class SimulateConfig:
     # seed of the numpy Generator behind every random draw (same config + seed -> identical tables).
     seed: int = bounded(7, 0, 2**63 - 1)
@@ -341,12 +362,16 @@ class SimulateConfig:
     phone: PhoneImuConfig = field(default_factory=PhoneImuConfig)
     # several floors, stairs, a lift and barometers (docs/floors.md)
     building: BuildingConfig = field(default_factory=BuildingConfig)
+    # BLE beacons (none by default)
+    ble: BleConfig = field(default_factory=BleConfig)
 
     def validate(self) -> None:
         check_ranges(self)
         for sub in (self.venue, self.radio, self.walkers, self.imu, self.magnetometer, self.devices, self.phone,
-                    self.building):
+                    self.building, self.ble):
             sub.validate()
+        if self.ble.n_beacons and self.building.floors > 1:
+            raise ValueError("ble.n_beacons: BLE beacons are simulated on one floor only (building.floors = 1)")
 
 
 

@@ -4,7 +4,8 @@ Layout (one directory per project; every table is Parquet)::
 
     WORKSPACE/
       manifest.json            the workspace marker: format "rmbuild-workspace", schema version, creation
-      data/                    ingest: walks, poses, wifi (with node), fixes, fingerprints, truth/
+      data/                    ingest: walks, poses, wifi (with node), ble (when any), fixes, fingerprints,
+                               truth/
       optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv;
                                tum/truth/*.txt: the true paths, same file names, when the input had them)
       map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures
@@ -88,6 +89,7 @@ ARTEFACTS: dict[str, str] = {
     "data.walks": "data/walks.parquet",
     "data.poses": "data/poses.parquet",
     "data.wifi": "data/wifi.parquet",
+    "data.ble": "data/ble.parquet",
     "data.fixes": "data/fixes.parquet",
     "data.fingerprints": "data/fingerprints.parquet",
     "data.truth_poses": "data/truth/poses.parquet",
@@ -97,6 +99,7 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_devices": "data/truth/devices.parquet",
     "data.truth_users": "data/truth/users.parquet",
     "data.truth_landmarks": "data/truth/landmarks.parquet",
+    "data.truth_beacons": "data/truth/beacons.parquet",
     "data.floorplan": "data/floorplan.geojson",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
@@ -117,6 +120,11 @@ ARTEFACTS: dict[str, str] = {
     "map.wide_csv_aps": "map/radiomap_uji_aps.csv",
     "map.sidecar": "map/radiomap.json",
     "map.histograms": "map/histograms.parquet",
+    "map.ble_cells": "map/radiomap_ble.parquet",
+    "map.ble_cell_table": "map/cells_ble.parquet",
+    "map.ble_wide_csv": "map/radiomap_ble_uji.csv",
+    "map.ble_wide_csv_aps": "map/radiomap_ble_uji_aps.csv",
+    "map.ble_sidecar": "map/radiomap_ble.json",
     "map.coverage_png": "map/coverage.png",
     "map.heatmaps_png": "map/heatmaps.png",
     # evaluate
@@ -495,7 +503,8 @@ class Workspace:
         venue = self.read_json("data.venue") if self.exists("data.venue") else None
         truth_extra = {
             k.removeprefix("data.truth_"): self.read_table(k)
-            for k in ("data.truth_walks", "data.truth_devices", "data.truth_users", "data.truth_landmarks")
+            for k in ("data.truth_walks", "data.truth_devices", "data.truth_users", "data.truth_landmarks",
+                      "data.truth_beacons")
             if self.exists(k)
         }
         return Dataset(
@@ -507,6 +516,7 @@ class Workspace:
             truth_aps=truth_aps,
             venue=venue,
             extra={"truth": truth_extra},
+            ble=self.read_table("data.ble") if self.exists("data.ble") else None,
         )
 
     def read_fingerprints(self) -> Fingerprints:
@@ -638,6 +648,8 @@ def write_dataset(writer: StageWriter, ds: Dataset, fp: Fingerprints) -> None:
     writer.table("data.walks", ds.walks)
     writer.table("data.poses", ds.poses)
     writer.table("data.wifi", ds.wifi)
+    if ds.ble is not None:
+        writer.table("data.ble", ds.ble)
     writer.table("data.fixes", ds.fixes)
     writer.table("data.fingerprints", fp.to_long())
     if ds.truth_poses is not None:

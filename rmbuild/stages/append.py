@@ -80,10 +80,14 @@ def merge(old: Dataset, new: Dataset) -> Dataset:
     a, b = old.extra.get("truth", {}), new.extra.get("truth", {})
     extra = {k: _cat(a[k], b[k]).drop_duplicates(ignore_index=True) if k in a and k in b else a.get(k, b.get(k))
              for k in dict.fromkeys([*a, *b])}
+    ble = old.ble
+    if new.ble is not None:
+        nb = new.ble.assign(node=new.ble["node"] + off)
+        ble = nb.reset_index(drop=True) if old.ble is None else _cat(old.ble, nb)
     return Dataset(walks=_cat(old.walks, new.walks), poses=_cat(old.poses, new.poses),
                    wifi=_cat(old.wifi, wifi), fixes=_cat(old.fixes, new.fixes), truth_poses=truth,
                    truth_aps=aps, venue=old.venue if old.venue is not None else new.venue,
-                   extra={"truth": extra})
+                   extra={"truth": extra}, ble=ble)
 
 
 def _cat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
@@ -104,6 +108,8 @@ def _report(old: dict[str, Any], ds: Dataset, fp: Fingerprints, new: Dataset, in
         "nodes_with_fingerprint": len(fp), "aps": len(fp.bssids), "fixes": len(ds.fixes),
         "has_truth_poses": ds.truth_poses is not None,
     })
+    if ds.ble is not None:
+        rep["ble"] = {**rep.get("ble", {}), "readings": len(ds.ble), "beacons": int(ds.ble["bssid"].nunique())}
     appended = list(old.get("appended", []))
     appended.append({"inputs": [str(p) for p in inputs], "format": reader, "walks": len(new.walks),
                      "poses": len(new.poses), "walk_ids": [str(w) for w in new.walks["walk_id"]]})

@@ -5,13 +5,14 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from rmbuild.config import MapConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.io.anchors import check_anchors, read_anchors
-from rmbuild.io.workspace import Workspace, level_of_floor
-from rmbuild.radiomap.build import CELL_COLUMNS
+from rmbuild.io.workspace import ARTEFACTS, StageWriter, Workspace, level_of_floor
+from rmbuild.radiomap.build import CELL_COLUMNS, RadioMap
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions, place_with_anchors
@@ -64,7 +65,9 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), anchors)
             info.update(extra)
     progress.phase("rasterising")
-    rm = build_radio_map(ds.wifi, xy, ds.poses["walk_id"].astype(str).to_numpy(), cfg, frame=info["frame"])
+    walk_of_node = ds.poses["walk_id"].astype(str).to_numpy()
+    rm = build_radio_map(ds.wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    ble_rm, ble_skipped = _ble_map(ds.ble, xy, walk_of_node, cfg, rm)
     t_build = time.perf_counter() - t0
     plan_doc = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
     walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
@@ -87,6 +90,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
         w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
         w.config(to_toml(cfg, "map"))
+        ble_report = _write_ble(w, ble_rm, info, level_of_floor(ws.root) or 0) if ble_rm is not None else ble_skipped
         report = {
             "stage": "export-map",
             "frame": info["frame"],
@@ -103,6 +107,39 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
                                                  / max(rm.histograms.count.sum(), 1))},
             "time_s": {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)},
         }
+        if ble_report is not None:
+            report["ble"] = ble_report
         w.report = report
     log_workspace(ws, viewer)
     return report
+
+
+def _ble_map(ble: pd.DataFrame | None, xy: np.ndarray, walk_of_node: np.ndarray, cfg: MapConfig, rm: RadioMap,
+             ) -> tuple[RadioMap | None, dict | None]:
+    """The BLE radio map on the Wi-Fi map's grid (its origin and cell size), from the same node positions;
+    (None, None) without BLE readings, (None, {"skipped": why}) when none can be placed."""
+    from rmbuild.radiomap import build_radio_map
+
+    if ble is None or not len(ble):
+        return None, None
+    try:
+        return build_radio_map(ble, xy, walk_of_node, cfg, rm.origin_xy, frame=rm.frame), None
+    except InputError as e:
+        return None, {"skipped": str(e).replace("Wi-Fi", "BLE")}
+
+
+def _write_ble(w: StageWriter, rm: RadioMap, info: dict, floor: int) -> dict:
+    """Write the BLE map's files (the Wi-Fi map's tables, CSV and sidecar under ``map.ble_*`` names);
+    returns its part of the report."""
+    w.table("map.ble_cells", rm.long_table())
+    w.table("map.ble_cell_table", rm.cells[list(CELL_COLUMNS)])
+    rm.wide_table("uji", floor=floor).to_csv(w.path("map.ble_wide_csv"), index=False)
+    pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
+        w.path("map.ble_wide_csv_aps"), index=False)
+    side = rm.sidecar()
+    side["frame_info"] = info
+    side["modality"] = "ble"
+    w.json("map.ble_sidecar", side)
+    keys = ("map.ble_cells", "map.ble_cell_table", "map.ble_wide_csv", "map.ble_wide_csv_aps", "map.ble_sidecar")
+    return {"cells": int(rm.n_cells), "beacons": len(rm.bssids), "reference_nodes": len(rm.nodes),
+            "files": [ARTEFACTS[k] for k in keys]}

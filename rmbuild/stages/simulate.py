@@ -21,6 +21,7 @@ TABLE_FILES = {
     "walks": "walks",
     "poses": "poses",
     "wifi": "wifi",
+    "ble": "ble",
     "fixes": "fixes",
     "truth_poses": "truth/poses",
     "truth_aps": "truth/aps",
@@ -29,6 +30,7 @@ TABLE_FILES = {
     "truth_users": "truth/users",
     "truth_landmarks": "truth/landmarks",
     "truth_floor_changes": "truth/floor_changes",
+    "truth_beacons": "truth/beacons",
 }
 
 
@@ -102,6 +104,7 @@ def run(
         "scans": int(data.wifi.groupby(["walk_id", "t_s"]).ngroups),
         "aps": len(data.truth_aps) if data.truth_aps is not None else None,
         "fixes": len(data.fixes),
+        **({"ble_readings": len(data.ble)} if data.ble is not None else {}),
         "imu_samples": len(imu) if imu is not None else 0,
         "time_s": {"simulate": round(t_sim, 3), "total": round(time.perf_counter() - t0, 3)},
     }

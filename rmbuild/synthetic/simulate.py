@@ -17,6 +17,8 @@ from rmbuild.synthetic.walkers import MagneticField, Router, User, dead_reckon, 
 # independent random streams (numpy SeedSequence children), so e.g. the walks do not change when only
 # the radio section of the config changes
 _STREAMS = ("venue", "radio", "people", "magnetic", "walks", "scans")
+#: spawn key of the BLE beacons' random stream (far past the spawned streams' 0, 1, ...)
+BLE_STREAM_KEY = 1000
 
 
 @dataclass
@@ -49,6 +51,10 @@ class SimulatedData:
     #: a building's floor changes (walk_id, kind, from / to floor, step index and time of the first step on
     #: the new floor), :mod:`rmbuild.synthetic.floor_change`; None for one floor
     truth_floor_changes: pd.DataFrame | None = None
+    #: BLE readings (walk_id, t_s, bssid, rssi_dbm) and the true beacons (bssid, x_m, y_m), with
+    #: ``[simulate.ble] n_beacons`` > 0 (:mod:`rmbuild.synthetic.ble`); None without beacons
+    ble: pd.DataFrame | None = None
+    truth_beacons: pd.DataFrame | None = None
 
 
 def radio_field(
@@ -166,6 +172,13 @@ def simulate(cfg: SimulateConfig, progress: Callable[[str, float], None] | None 
         venue=venue.to_dict(),
         radio=radio,
     )
+    if cfg.ble.n_beacons:
+        from rmbuild.synthetic.ble import beacon_readings, place_beacons
+
+        # a stream of its own (outside the spawned ones), so that the other tables do not change with it
+        rb = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(BLE_STREAM_KEY,)))
+        data.truth_beacons = place_beacons(cfg.ble, venue, rb)
+        data.ble = beacon_readings(cfg.ble, data.truth_beacons, data.truth_poses, rb)
     report("done", 1.0)
     return data
 

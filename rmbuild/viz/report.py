@@ -45,6 +45,8 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("ingest", "scans", "scans"),
     ("ingest", "aps", "access points"),
     ("ingest", "fixes", "position fixes"),
+    ("ingest", "ble.readings", "BLE readings"),
+    ("ingest", "ble.beacons", "BLE beacons"),
     ("optimize", "factors.odometry", "odometry factors"),
     ("optimize", "factors.vicinity", "vicinity factors"),
     ("optimize", "linked_walks", "walks linked into the map"),
@@ -61,6 +63,8 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("map", "n_cells", "radio map cells"),
     ("map", "n_aps", "radio map APs"),
     ("map", "cell_size_m", "cell size (m)"),
+    ("map", "ble.cells", "BLE radio map cells (map/radiomap_ble.*)"),
+    ("map", "ble.beacons", "BLE radio map beacons"),
 )
 
 _CSS = """

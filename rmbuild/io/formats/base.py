@@ -13,6 +13,8 @@ Contract for ``Reader.read``:
   poses or IMU, never both). Readers only read: :mod:`rmbuild.ingest_core` runs the PDR on them, once, for
   every format.
 - ``wifi``: walk_id, t_s, bssid (str), rssi_dbm (float); optional freq_mhz, ssid.
+- ``ble``: BLE beacon readings in the ``wifi`` columns (bssid = the beacon's id, its MAC; ssid = its
+  iBeacon ``uuid:major:minor`` or ""); None or empty when the format or file has none.
 - ``fixes``: walk_id, t_s, x_m, y_m, label — ground truth / landmark fixes (may be empty).
 - ``walks``: walk_id, device_id, user_id, role, source.
 - ``floor`` (optional str column on ``walks`` or ``poses``): the floor the data is on; an input with
@@ -92,6 +94,8 @@ class RawInput:
     pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     #: where a walk was cut between floors (:mod:`rmbuild.ingest_floors`): walk, t_s, the segments either side
     transitions: list[dict] = field(default_factory=list)
+    #: BLE beacon readings (the ``wifi`` columns; ``where`` key "ble"); None: the input has none
+    ble: pd.DataFrame | None = None
 
 
 class Reader(ABC):

@@ -3,7 +3,7 @@
 One logfile = one walk (walk_id = file name without extension). ``%`` lines are comments/header; every other
 line is ``TAG;AppTimestamp;...`` with the app timestamp (s) as the common clock. Used tags:
 ACCE, GYRO, AHRS (the walk's raw phone IMU: ingest runs the PDR on it), IMUI (foot-mounted MIMU22BT step
-increments, integrated here and preferred when present), WIFI,
+increments, integrated here and preferred when present), WIFI, BLE4 (BLE beacons: id = MAC),
 POSI (ground-truth WGS84 fixes, converted to a local ENU frame in metres). MAGN lines are checked but not
 used. Every other tag is skipped with a count. docs/formats-real.md describes the format and the choices.
 """
@@ -36,10 +36,15 @@ from rmbuild.pdr import (
 
 FORMAT_NAME = "ipin"
 #: tag -> number of ';'-separated fields including the tag (WIFI: at least; the SSID may contain ';')
-_FIELDS = {"ACCE": 7, "GYRO": 7, "MAGN": 7, "AHRS": 10, "WIFI": 7, "POSI": 7, "IMUI": 18, "PRES": 5}
+_FIELDS = {"ACCE": 7, "GYRO": 7, "MAGN": 7, "AHRS": 10, "WIFI": 7, "POSI": 7, "IMUI": 18, "PRES": 5, "BLE4": 5}
+#: values kept per row of the tags whose rows are not all numbers (WIFI: t, sensor t, freq, rss; BLE4: t, rss)
+_KEPT = {"WIFI": 4, "BLE4": 2}
+#: BLE4 fields after the tag, per beacon kind: iBeacon t;kind;MAC;RSSI;Power;Major;Minor;UUID, Eddystone
+#: t;kind;MAC;RSSI;instanceID[;telemetry...] (at least)
+_BLE4_FIELDS = {"iBeacon": 9, "Eddystone": 6}
 #: tags of the GetSensorData app that rmbuild does not use (skipped with a count, like any other tag)
 KNOWN_UNUSED = (
-    "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLE4", "BLUE", "RFID", "IMUX", "IMUL",
+    "LIGH", "PROX", "HUMI", "TEMP", "SOUN", "GNSS", "BLUE", "RFID", "IMUX", "IMUL",
 )
 _TAG_LINE = re.compile(r"^[A-Z][A-Z0-9]{3};")
 #: characters; a longer line is an error (the IPIN 2023 logfiles' longest line, a header line, has 340)
@@ -47,7 +52,7 @@ MAX_LINE_CHARS = 4096
 _NAME_SUFFIXES = (".txt", ".txt.gz", ".log", ".log.gz", ".csv", ".csv.gz")
 #: our own schema's file names; never a logfile
 _SCHEMA_NAMES = re.compile(
-    r"^(walks|poses|wifi|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
+    r"^(walks|poses|wifi|ble|fixes|aps|devices|users|landmarks)[^/]*\.(csv|csv\.gz|parquet)$")
 
 def wgs84_to_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float, lon0_deg: float,
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -122,6 +127,7 @@ class _Log:
     num: dict[str, np.ndarray] = field(default_factory=dict)
     line: dict[str, np.ndarray] = field(default_factory=dict)
     wifi_text: list[tuple[str, str]] = field(default_factory=list)  # (ssid, bssid) per WIFI row, sorted
+    ble_text: list[tuple[str, str]] = field(default_factory=list)   # (identity, MAC) per BLE4 row, sorted
     skipped: Counter = field(default_factory=Counter)
     t_first: float = math.nan
 
@@ -143,6 +149,7 @@ def parse_logfile(path: Path) -> _Log:
     rows: dict[str, list[list[float]]] = {t: [] for t in _FIELDS}
     lnos: dict[str, list[int]] = {t: [] for t in _FIELDS}
     wifi_text: list[tuple[str, str]] = []
+    ble_text: list[tuple[str, str]] = []
     manufacturer = model = ""
     created = math.nan
     seen_data = False
@@ -173,6 +180,11 @@ def parse_logfile(path: Path) -> _Log:
         tag = parts[0]
         if tag not in _FIELDS:
             log.skipped[tag] += 1
+            continue
+        if tag == "BLE4":
+            vals = _ble4(parts, where, ble_text)
+            rows[tag].append(vals)
+            lnos[tag].append(i)
             continue
         if len(parts) > _FIELDS[tag] and parts[-1] == "" and tag != "WIFI":
             parts = parts[:-1]   # a trailing ';'
@@ -213,7 +225,7 @@ def parse_logfile(path: Path) -> _Log:
     log.t_first += epoch
     for tag in _FIELDS:
         arr = np.asarray(rows[tag], dtype=np.float64).reshape(len(rows[tag]), -1) if rows[tag] else \
-            np.zeros((0, 4 if tag == "WIFI" else _FIELDS[tag] - 1))
+            np.zeros((0, _KEPT.get(tag, _FIELDS[tag] - 1)))
         if len(arr):
             arr[:, 0] += epoch
         ln = np.asarray(lnos[tag], dtype=np.int64)
@@ -221,8 +233,34 @@ def parse_logfile(path: Path) -> _Log:
         log.num[tag], log.line[tag] = arr[o], ln[o]
         if tag == "WIFI":
             log.wifi_text = [wifi_text[j] for j in o]
+        if tag == "BLE4":
+            log.ble_text = [ble_text[j] for j in o]
     log.skipped.update({"MAGN": len(log.num["MAGN"])} if len(log.num["MAGN"]) else {})
     return log
+
+
+def _ble4(parts: list[str], where: str, text: list[tuple[str, str]]) -> list[float]:
+    """One BLE4 line's (app time, RSSI), its (identity, MAC) appended to ``text``: the identity is an iBeacon's
+    ``uuid:major:minor``, "" for an Eddystone. A malformed line -> InputError at ``where``."""
+    if parts[-1] == "" and len(parts) > 5:
+        parts = parts[:-1]   # a trailing ';'
+    kind = parts[2] if len(parts) > 2 else ""
+    need = _BLE4_FIELDS.get(kind)
+    if need is None:
+        raise InputError(f"BLE4: unknown beacon kind {kind!r} (expected iBeacon or Eddystone)", where)
+    if len(parts) < need or (kind == "iBeacon" and len(parts) != need):
+        raise InputError(f"BLE4: an {kind} line has "
+                         f"{'' if kind == 'iBeacon' else 'at least '}{need} ';'-separated fields, got {len(parts)}",
+                         where)
+    mac = parts[3].strip().lower()
+    if not re.fullmatch(r"[0-9a-f]{2}(:[0-9a-f]{2}){5}", mac):
+        raise InputError(f"BLE4: MAC {parts[3]!r} is not a MAC address", where)
+    ident = ""
+    if kind == "iBeacon":
+        major, minor = (int(_float(v, "BLE4", where)) for v in parts[6:8])
+        ident = f"{parts[8].strip()}:{major}:{minor}"
+    text.append((ident, mac))
+    return [_float(parts[1], "BLE4", where), _float(parts[4], "BLE4", where)]
 
 
 def _creation_epoch(text: str) -> float:
@@ -268,7 +306,7 @@ def raw_imu(log: _Log) -> RawImu:
 @register
 class IpinReader(Reader):
     name = FORMAT_NAME
-    description = "IPIN / GetSensorData logfiles (';'-separated): phone IMU or foot IMU (IMUI), Wi-Fi, POSI"
+    description = "IPIN / GetSensorData logfiles (';'-separated): phone IMU or foot IMU (IMUI), Wi-Fi, BLE, POSI"
 
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
@@ -305,8 +343,9 @@ class IpinReader(Reader):
                 notes.append(f"POSI fixes in a local ENU frame at the first fix of {first.path.name}: "
                              f"lat {lat0:.9f}, lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg "
                              "set it)")
-        walks, poses, wifi, fixes = [], [], [], []
+        walks, poses, wifi, fixes, ble = [], [], [], [], []
         wifi_where: list[str] = []
+        ble_where: list[str] = []
         fix_where: list[str] = []
         imu: dict[str, RawImu] = {}
         skipped: Counter = Counter()
@@ -333,6 +372,14 @@ class IpinReader(Reader):
                 "ssid": pd.Series([s for s, _ in lg.wifi_text], dtype=object),
             }))
             wifi_where.extend(f"{f}:{ln}" for ln in lg.line["WIFI"])
+            b = lg.num["BLE4"]
+            if len(b):
+                ble.append(pd.DataFrame({
+                    "walk_id": pd.Series([lg.walk_id] * len(b), dtype=object), "t_s": b[:, 0],
+                    "bssid": pd.Series([m for _, m in lg.ble_text], dtype=object), "rssi_dbm": b[:, 1],
+                    "freq_mhz": np.nan, "ssid": pd.Series([i for i, _ in lg.ble_text], dtype=object),
+                }))
+                ble_where.extend(f"{f}:{ln}" for ln in lg.line["BLE4"])
             p = lg.num["POSI"]
             e, n = wgs84_to_enu(p[:, 2], p[:, 3], lat0, lon0) if len(p) else (np.zeros(0), np.zeros(0))
             fixes.append(pd.DataFrame({
@@ -364,11 +411,13 @@ class IpinReader(Reader):
             notes=notes,
             merge_duplicate_readings=True,
             pressure=pressure,
+            ble=pd.concat(ble, ignore_index=True) if ble else None,
             where={
                 "walks": lambda i: str(seen[walks[i]["walk_id"]]),
                 "poses": lambda i: f"{seen[pw[i]]} (step {ps[i]})",
                 "wifi": lambda i: wifi_where[i],
                 "fixes": lambda i: fix_where[i],
+                "ble": lambda i: ble_where[i],
             },
         )
 

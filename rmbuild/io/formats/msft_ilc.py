@@ -2,9 +2,9 @@
 
 One trace = one walk (walk_id = file name without ``.txt``/``.txt.gz``). TYPE_ACCELEROMETER, TYPE_GYROSCOPE
 and TYPE_ROTATION_VECTOR are the walk's raw IMU (ingest turns them into per-step poses); TYPE_WIFI rows become
-readings after the stale-row filter; TYPE_WAYPOINT rows are ground-truth fixes in the floor's frame
-(never fed to the optimiser as such). Every other line type is skipped with a count. docs/formats-real.md
-describes the format and the choices made here.
+readings after the stale-row filter; TYPE_BEACON rows become BLE readings (beacon id = MAC); TYPE_WAYPOINT rows
+are ground-truth fixes in the floor's frame (never fed to the optimiser as such). Every other line type is skipped
+with a count. docs/formats-real.md describes the format and the choices made here.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import json
 import re
 import zlib
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,7 @@ _USED = {
     "TYPE_GYROSCOPE": 6,        # x y z (rad/s) accuracy
     "TYPE_ROTATION_VECTOR": 6,  # x y z (quaternion vector part) accuracy
     "TYPE_WIFI": 7,             # ssid bssid rssi_dBm freq_MHz last_seen_unix_ms
+    "TYPE_BEACON": 10,          # uuid major minor tx_power_dBm rssi_dBm distance_m mac unix_ms
     "TYPE_WAYPOINT": 4,         # x y (m)
 }
 
@@ -134,6 +135,9 @@ class _Trace:
     n_wifi_stale: int
     n_wifi_dup: int = 0
     site: str = ""  # the header's SiteID (one building)
+    ble: pd.DataFrame = field(default_factory=pd.DataFrame)   # BLE readings (TYPE_BEACON)
+    ble_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    n_ble_dup: int = 0
 
 
 #: per used type: field positions of the numeric values and of the text values
@@ -142,9 +146,10 @@ _NUM_COLS = {
     "TYPE_GYROSCOPE": [2, 3, 4, 5],
     "TYPE_ROTATION_VECTOR": [2, 3, 4, 5],
     "TYPE_WIFI": [4, 5, 6],
+    "TYPE_BEACON": [3, 4, 6, 9],   # major, minor, rssi, time (its NaN tells a short line in the fast path)
     "TYPE_WAYPOINT": [2, 3],
 }
-_TEXT_COLS = {"TYPE_WIFI": [2, 3]}
+_TEXT_COLS = {"TYPE_WIFI": [2, 3], "TYPE_BEACON": [2, 8]}
 _HEADER_RE = re.compile(rb"^#[^\n]*", re.M)
 
 
@@ -167,6 +172,13 @@ def _numeric(table: np.ndarray, linenos: np.ndarray, path: Path, what: str, dtyp
                     raise InputError(f"{what}: non-numeric or non-finite value {str(v)!r}",
                                      f"{path}:{ln}") from None
         raise  # pragma: no cover - the loop always finds the culprit
+
+
+def _gather(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> bytes:
+    """The bytes ``buf[start[i]:end[i]]`` of every i, concatenated (one gather over those bytes only)."""
+    n = end - start
+    idx = np.arange(int(n.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(n) - n), n)
+    return buf[idx].tobytes()
 
 
 def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
@@ -221,12 +233,6 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
         names.append(b[: b.index(b"\t")].decode("ascii", "replace") if b"\t" in b else None)
     if any(n is None for n in names):
         return None
-    # per byte: the code of its line's type (1 + index into _USED; 0 = unused / comment)
-    used = list(_USED)
-    code_of_uniq = np.array([used.index(n) + 1 if n in _USED else 0 for n in names], dtype=np.uint8)
-    line_code = np.zeros(len(starts), dtype=np.uint8)
-    line_code[line_no - 1] = code_of_uniq[inv.ravel()]
-    byte_code = np.repeat(line_code, ends - starts + 1)
     out: dict[str, _Rows] = {}
     skipped: Counter = Counter()
     for j, name in enumerate(names):
@@ -241,7 +247,7 @@ def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
                              np.zeros((0, len(text_cols)), dtype=object), line)
             continue
-        block = buf[byte_code == used.index(typ) + 1].tobytes()
+        block = _gather(buf, ds[sel], de[sel] + 1)
         try:
             df = pd.read_csv(io.BytesIO(block), sep="\t", header=None, names=list(range(nfields)),
                              dtype={c: str for c in text_cols}, keep_default_na=False, na_values={},
@@ -376,6 +382,7 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
         "ssid": pd.Series(w.text[idx, 0] if len(idx) else [], dtype=object),
     })
 
+    ble, ble_lines, n_ble_dup = _beacons(rows["TYPE_BEACON"], wid, path)
     wp = _stream(rows["TYPE_WAYPOINT"], 2, False)
     waypoints = pd.DataFrame({
         "walk_id": pd.Series([wid] * len(wp.t_s), dtype=object), "t_s": wp.t_s,
@@ -384,7 +391,29 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
         "floor": pd.Series([floor] * len(wp.t_s), dtype=object),
     })
     return _Trace(wid, device, floor, acc, gyr, rot, wifi, w.line[idx], waypoints, wp.line, skipped, n_stale,
-                  n_dup, site)
+                  n_dup, site, ble, ble_lines, n_ble_dup)
+
+
+def _beacons(b: _Rows, wid: str, path: Path) -> tuple[pd.DataFrame, np.ndarray, int]:
+    """TYPE_BEACON rows as BLE readings in time order: bssid = the beacon's MAC (lower case), ssid = its
+    iBeacon ``uuid:major:minor``; a repeated (time, MAC) keeps its first row. Returns the readings, their
+    lines and the number of repeats dropped."""
+    mac = np.array([str(m).strip().lower() for m in b.text[:, 1]], dtype=object)
+    empty = np.flatnonzero(mac == "")
+    if len(empty):
+        raise InputError("TYPE_BEACON: empty MAC address", f"{path}:{b.line[empty[0]]}")
+    code = pd.factorize(mac)[0]
+    order = np.lexsort((code, b.t_ms))  # stable: file order among equal (time, MAC)
+    keep = np.r_[True, (b.t_ms[order][1:] != b.t_ms[order][:-1]) | (code[order][1:] != code[order][:-1])]
+    idx = order[keep[: len(order)]]
+    ident = [f"{str(u).strip()}:{int(j)}:{int(n)}" for u, j, n in zip(b.text[idx, 0], b.num[idx, 0], b.num[idx, 1],
+                                                                        strict=True)]
+    ble = pd.DataFrame({
+        "walk_id": pd.Series([wid] * len(idx), dtype=object), "t_s": b.t_ms[idx] / 1000.0,
+        "bssid": pd.Series(mac[idx], dtype=object), "rssi_dbm": b.num[idx, 2], "freq_mhz": np.nan,
+        "ssid": pd.Series(ident, dtype=object),
+    })
+    return ble, b.line[idx], len(mac) - len(idx)
 
 
 def _floor_plans(files: list[Path]) -> dict[str, dict]:
@@ -419,7 +448,7 @@ def _trace_floor(tr: _Trace, path: Path) -> str:
 @register
 class MsftIlcReader(Reader):
     name = FORMAT_NAME
-    description = "Microsoft Indoor Location Competition 2.0 traces (.txt/.txt.gz): phone IMU + Wi-Fi, PDR"
+    description = "Microsoft Indoor Location Competition 2.0 traces (.txt/.txt.gz): phone IMU + Wi-Fi + BLE, PDR"
 
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
@@ -450,8 +479,10 @@ class MsftIlcReader(Reader):
         walks, wifi, fixes = [], [], []
         imu: dict[str, RawImu] = {}
         wifi_lines, fix_lines = [], []
+        ble: list[pd.DataFrame] = []
+        ble_lines: list[np.ndarray] = []
         skipped: Counter = Counter()
-        n_stale = n_wifi = n_dup = 0
+        n_stale = n_wifi = n_dup = n_ble_dup = 0
         sites: Counter = Counter()
         for f in traces:
             tr = parse_trace(f, opts)
@@ -467,6 +498,10 @@ class MsftIlcReader(Reader):
             imu[tr.walk_id] = raw_imu(tr, f)
             wifi.append(tr.wifi)
             wifi_lines.append(tr.wifi_lines)
+            if len(tr.ble):
+                ble.append(tr.ble)
+                ble_lines.append(tr.ble_lines)
+                n_ble_dup += tr.n_ble_dup
             fixes.append(tr.waypoints)
             fix_lines.append(tr.waypoint_lines)
             walks.append({"walk_id": tr.walk_id, "device_id": tr.device_id, "user_id": "", "role": "",
@@ -483,6 +518,8 @@ class MsftIlcReader(Reader):
         if n_wifi:
             notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
                          f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
+        if n_ble_dup:
+            notes.append(f"merged {n_ble_dup:,} TYPE_BEACON rows repeating a MAC at one time (first kept)")
         if n_dup:
             notes.append(f"merged {n_dup:,} Wi-Fi rows repeating a BSSID within one scan (heard on two channels; "
                          "the most recently seen row kept)")
@@ -495,8 +532,9 @@ class MsftIlcReader(Reader):
             imu=imu,
             skipped=dict(sorted(skipped.items())),
             notes=notes,
-            where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines),
+            where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines, ble, ble_lines),
             floorplan=plan,
+            ble=pd.concat(ble, ignore_index=True) if ble else None,
             floorplans=plans if len(plans) > 1 else {},
         )
 
@@ -512,8 +550,12 @@ def raw_imu(tr: _Trace, path: Path) -> RawImu:
 
 
 def where_functions(paths: dict[str, Path], walks: list[dict], wifi: list[pd.DataFrame],
-                    wifi_lines: list[np.ndarray], fixes: list[pd.DataFrame], fix_lines: list[np.ndarray]) -> dict:
+                    wifi_lines: list[np.ndarray], fixes: list[pd.DataFrame], fix_lines: list[np.ndarray],
+                    ble: list[pd.DataFrame] | None = None, ble_lines: list[np.ndarray] | None = None) -> dict:
     """``RawInput.where``: row position -> "file:line"."""
+    bfile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]), dtype=object)
+                            for d in ble]) if ble else np.zeros(0, dtype=object)
+    bline = np.concatenate(ble_lines) if ble_lines else np.zeros(0, dtype=np.int64)
     wfile = np.concatenate([np.full(len(d), str(paths[d["walk_id"].iat[0]]) if len(d) else "", dtype=object)
                             for d in wifi]) if wifi else np.zeros(0, dtype=object)
     wline = np.concatenate(wifi_lines) if wifi_lines else np.zeros(0, dtype=np.int64)
@@ -524,4 +566,5 @@ def where_functions(paths: dict[str, Path], walks: list[dict], wifi: list[pd.Dat
         "walks": lambda i: str(paths[walks[i]["walk_id"]]),
         "wifi": lambda i: f"{wfile[i]}:{wline[i]}",
         "fixes": lambda i: f"{ffile[i]}:{fline[i]}",
+        "ble": lambda i: f"{bfile[i]}:{bline[i]}",
     }

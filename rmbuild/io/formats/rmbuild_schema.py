@@ -1,8 +1,8 @@
 """rmbuild's own input schema: CSV (optionally gzip'd) or Parquet tables, documented in docs/data-format.md.
 
-Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``fixes*`` (``.csv``, ``.csv.gz`` or
-``.parquet``), and inside a ``truth/`` folder ``poses*``, ``aps*``, ``walks*``, ``devices*``, ``users*``,
-``landmarks*`` and ``venue.json``. Several files of one table are concatenated.
+Files are recognised by name: ``walks*``, ``poses*``, ``wifi*``, ``ble*``, ``fixes*`` (``.csv``, ``.csv.gz``
+or ``.parquet``), and inside a ``truth/`` folder ``poses*``, ``aps*``, ``walks*``, ``devices*``, ``users*``,
+``landmarks*``, ``beacons*`` and ``venue.json``. Several files of one table are concatenated.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from rmbuild.errors import InputError, one_line
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals
 
-TABLES = ("walks", "poses", "wifi", "fixes", "imu")
-TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes")
+TABLES = ("walks", "poses", "wifi", "ble", "fixes", "imu")
+TRUTH_TABLES = ("poses", "aps", "walks", "devices", "users", "landmarks", "floor_changes", "beacons")
 SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
 # column -> kind ("str" | "num"); required and optional columns per table
@@ -41,6 +41,11 @@ POSE_OPT = {"yaw_abs_rad": "num", "yaw_abs_sigma_rad": "num", "step_freq_hz": "n
 SCHEMAS: dict[str, tuple[dict[str, str], dict[str, str]]] = {
     "walks": ({"walk_id": "str"}, {"device_id": "str", "user_id": "str", "role": "str", "floor": "str"}),
     "wifi": (
+        {"walk_id": "str", "t_s": "num", "bssid": "str", "rssi_dbm": "num"},
+        {"freq_mhz": "num", "ssid": "str"},
+    ),
+    # BLE beacon readings: the wifi columns, bssid = the beacon's id (MAC), ssid = its iBeacon uuid:major:minor
+    "ble": (
         {"walk_id": "str", "t_s": "num", "bssid": "str", "rssi_dbm": "num"},
         {"freq_mhz": "num", "ssid": "str"},
     ),
@@ -442,7 +447,7 @@ def _read_imu(files: list[Path], pressure: dict[str, tuple[np.ndarray, np.ndarra
 @register
 class RmbuildSchemaReader(Reader):
     name = "rmbuild"
-    description = "rmbuild's own CSV/Parquet schema (walks, poses, wifi, fixes + optional truth/)"
+    description = "rmbuild's own CSV/Parquet schema (walks, poses, wifi, ble, fixes + optional truth/)"
 
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
@@ -486,7 +491,7 @@ class RmbuildSchemaReader(Reader):
             poses = pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64) for c in POSE_ABS})
 
         tables: dict[str, pd.DataFrame] = {}
-        for t in ("wifi", "fixes", "walks", "truth/poses"):
+        for t in ("wifi", "ble", "fixes", "walks", "truth/poses"):
             if t not in by_table:
                 continue
             req, opt = SCHEMAS[t]
@@ -520,6 +525,7 @@ class RmbuildSchemaReader(Reader):
             imu=imu,
             where=where,
             pressure=pressure,
+            ble=tables.get("ble"),
         )
         if skipped:
             raw.skipped["unrecognised file"] = skipped
