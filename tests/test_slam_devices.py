@@ -46,6 +46,16 @@ def test_no_offset_without_enough_shared_aps_or_a_second_device():
     assert same is fp and off == {"a": 0.0}
 
 
+def test_no_offset_when_aps_differ_both_ways():
+    """Two phones alike that walked different parts of a venue: per-AP medians differ by ±3 dB either way."""
+    rng = np.random.default_rng(3)
+    a = _fields(rng, 300, 40, 0.0, slice(0, 40))
+    b = _fields(rng, 300, 40, 0.0, slice(0, 40)) + rng.choice([-3.0, 3.0], 40)[None]
+    b[:, :25] += 2.0  # a 2 dB median, but 40 % of the APs the other way
+    off = device_offsets(np.r_[a, b], np.r_[np.full(300, "a"), np.full(300, "b")])
+    assert off == {"a": 0.0, "b": 0.0}
+
+
 @pytest.fixture(scope="module")
 def two_phones():
     """A venue whose last three walks were recorded by a second phone reading 10 dB higher."""
