@@ -7,7 +7,7 @@ import math
 import resource
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -15,12 +15,13 @@ import pandas as pd
 from rmbuild.config import OptimizeConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.evaluate.trajectory import trajectory_metrics
-from rmbuild.floorplan import FloorPlan, from_local_geojson
-from rmbuild.io.floorplan import check_plan_frame
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.viz.viewer import Viewer, ensure_viewer
+
+if TYPE_CHECKING:
+    from rmbuild.floorplan import FloorPlan
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +199,9 @@ def _floor_plan(ws: Workspace, cfg: OptimizeConfig, ds) -> tuple[FloorPlan | Non
     used (warned). An error when the config asks for a plan and there is none."""
     if not cfg.floorplan.use:
         return None, None
+    from rmbuild.floorplan import from_local_geojson  # shapely: imported only when a plan is used
+    from rmbuild.io.floorplan import check_plan_frame
+
     if not ws.exists("data.floorplan"):
         raise InputError("optimize.floorplan.use = true, but the workspace has no floor plan "
                          "(`rmbuild ingest --floorplan FILE`)", str(ws.path("data.floorplan")))
