@@ -186,7 +186,8 @@ def _reference(mw: WalkSet, prev: PreviousSolution, held: np.ndarray) -> int:
 
 @dataclass
 class _Locator:
-    """What :class:`ScanEvidence` asks of the fingerprints (as the Wi-Fi source's scan locator)."""
+    """What :class:`ScanEvidence` asks of the fingerprints (as the Wi-Fi source's scan locator); ``rss`` over the
+    APs the free scans saw (:func:`ap_subset`): every distance asked for has a free scan on one side."""
 
     rss: RssMatrix
     row_node: np.ndarray
@@ -225,7 +226,9 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]
-    locator = _Locator(rss, fp.node, free_window_median(rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
+    # every distance the placement asks for has a free scan on one side: the APs the free scans saw suffice
+    free_rss = ap_subset(rss, free_rows)
+    locator = _Locator(free_rss, fp.node, free_window_median(free_rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
     rf = _rf_model(rf_report, walks, rss, meta, free_rows, cfg)
     ties = ContinuitySource(walks, cfg.continuity, rf, rss, fp.node).ties()
     rot = CompassSource(mw, cfg.compass).rotation_priors()
@@ -262,10 +265,9 @@ def scan_neighbours(loc: _Locator, meta: RowMeta, rows: np.ndarray, held_rows: n
       distances (float32, inf where fewer) and their rows (-1), the start of the kNN growth, whose held
       map never changes (:class:`_HeldScanEvidence`).
 
-    The products run over the APs the free scans saw only (a pair's shared APs and dot product need no
-    other); the sums over all APs are the full matrix's. One block per BLOCK_ROWS free scans (the full
-    run's run-matched search compares every scan with every other)."""
-    rss = ap_subset(loc.rss, rows)
+    One block per BLOCK_ROWS free scans (the full run's run-matched search compares every scan with every
+    other)."""
+    rss = loc.rss
     held_cols = np.flatnonzero(held_rows)
     kk = min(KNN_K, len(held_cols))
     best_d = np.full((len(rows), KNN_K), np.inf, np.float32)
@@ -297,7 +299,8 @@ def scan_neighbours(loc: _Locator, meta: RowMeta, rows: np.ndarray, held_rows: n
 
 def ap_subset(rss: RssMatrix, rows: np.ndarray) -> RssMatrix:
     """``rss`` restricted to the APs some of ``rows`` saw, its squared norms and AP counts kept: the
-    distances of those rows to any row are the full matrix's (up to the rounding of the products)."""
+    distances of those rows to any row are the full matrix's (a pair's shared APs and dot product need no
+    other AP; equal up to the rounding of the products), the distances between two other rows are not."""
     aps = rss.b[rows].any(axis=0)
     return RssMatrix(rss.a[:, aps], rss.b[:, aps], rss.sq, rss.cnt)
 
