@@ -101,7 +101,8 @@ def test_progress_counts_and_log_lines(caplog) -> None:
     from rich.console import Console
     from rich.progress import Progress
 
-    from rmbuild.cli.progress import CountRateColumn, LogProgress, RichProgress, progress_display
+    from rmbuild.cli.progress import LogProgress, progress_display
+    from rmbuild.cli.progress_bars import CountRateColumn, RichProgress
 
     bar = Progress(CountRateColumn(), console=Console(file=io.StringIO(), force_terminal=True, width=100))
     rp = RichProgress(bar, verbose=True)

@@ -6,29 +6,61 @@ registry below names every section a config file may contain; anything else is a
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rmbuild.config.base import from_dict, load_toml, parse_toml, section_of, to_dict, to_toml, toml_key_line
-from rmbuild.config.build import BuildConfig
-from rmbuild.config.evaluate import EvaluateConfig
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.optimize import OptimizeConfig
-from rmbuild.config.pdr import PdrConfig
-from rmbuild.config.radiomap import MapConfig
-from rmbuild.config.simulate import SimulateConfig
 from rmbuild.errors import ConfigError
 
-#: TOML section name -> config dataclass
-SECTIONS: dict[str, type] = {
-    "simulate": SimulateConfig,
-    "ingest": IngestConfig,
-    "pdr": PdrConfig,
-    "optimize": OptimizeConfig,
-    "map": MapConfig,
-    "evaluate": EvaluateConfig,
-    "build": BuildConfig,
+if TYPE_CHECKING:
+    from rmbuild.config.build import BuildConfig
+    from rmbuild.config.evaluate import EvaluateConfig
+    from rmbuild.config.ingest import IngestConfig
+    from rmbuild.config.optimize import OptimizeConfig
+    from rmbuild.config.pdr import PdrConfig
+    from rmbuild.config.radiomap import MapConfig
+    from rmbuild.config.simulate import SimulateConfig
+
+#: TOML section name -> "module:class" of its config dataclass
+_SECTION_CLASSES = {
+    "simulate": "rmbuild.config.simulate:SimulateConfig",
+    "ingest": "rmbuild.config.ingest:IngestConfig",
+    "pdr": "rmbuild.config.pdr:PdrConfig",
+    "optimize": "rmbuild.config.optimize:OptimizeConfig",
+    "map": "rmbuild.config.radiomap:MapConfig",
+    "evaluate": "rmbuild.config.evaluate:EvaluateConfig",
+    "build": "rmbuild.config.build:BuildConfig",
 }
+
+
+class _Sections(Mapping[str, type]):
+    """TOML section name -> config dataclass; a section's module is imported when its class is first used
+    (a command loads only its own stage's config)."""
+
+    def __getitem__(self, name: str) -> type:
+        mod, cls = _SECTION_CLASSES[name].split(":")
+        return getattr(importlib.import_module(mod), cls)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_SECTION_CLASSES)
+
+    def __len__(self) -> int:
+        return len(_SECTION_CLASSES)
+
+
+#: TOML section name -> config dataclass: every section a config file may contain
+SECTIONS: Mapping[str, type] = _Sections()
+
+
+def __getattr__(name: str) -> Any:
+    """The config dataclasses (``from rmbuild.config import OptimizeConfig``), imported when first asked for."""
+    for where in _SECTION_CLASSES.values():
+        mod, cls = where.split(":")
+        if cls == name:
+            return getattr(importlib.import_module(mod), cls)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def load_stage_config(

@@ -53,7 +53,7 @@ from rmbuild import __version__
 from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.io.atomic import clean_json, recover_dir, replacing_dir, write_json_atomic
 from rmbuild.io.lock import holds_lock, workspace_lock
-from rmbuild.types import Dataset, Fingerprints
+from rmbuild.types import WIFI_COLUMNS, Dataset, Fingerprints
 
 #: version of this layout; 1 kept the stage reports and checksums outside the stage directories
 SCHEMA_VERSION = 2
@@ -496,7 +496,9 @@ class Workspace:
         key = f"{STAGE_DIRS[stage]}.config"
         return self.read_text(key) if self.has(stage) and self.exists(key) else None
 
-    def read_dataset(self) -> Dataset:
+    def read_dataset(self, readings: bool = True) -> Dataset:
+        """The ingested data set. ``readings=False``: ``wifi`` is left empty (its columns only) and not read,
+        for the stages that work from the fingerprints alone (it is the largest table)."""
         self.require("ingest")
         truth_poses = self.read_table("data.truth_poses") if self.exists("data.truth_poses") else None
         truth_aps = self.read_table("data.truth_aps") if self.exists("data.truth_aps") else None
@@ -510,7 +512,7 @@ class Workspace:
         return Dataset(
             walks=self.read_table("data.walks"),
             poses=self.read_table("data.poses"),
-            wifi=self.read_table("data.wifi"),
+            wifi=self.read_table("data.wifi") if readings else pd.DataFrame({c: [] for c in WIFI_COLUMNS}),
             fixes=self.read_table("data.fixes"),
             truth_poses=truth_poses,
             truth_aps=truth_aps,

@@ -47,7 +47,7 @@ from rmbuild.slam.evidence.continuity import JOIN_CAUCHY_K, ContinuitySource
 from rmbuild.slam.factors import X, fuzzy_error, poses_to_values, values_to_poses, vicinity_factor, vicinity_noise
 from rmbuild.slam.pairs import RowMeta, window_median
 from rmbuild.slam.placement.edges import RANSAC_SEED
-from rmbuild.slam.placement.grow import MAX_ROUNDS, GrowthEvidence, PairEvidence, ScanEvidence
+from rmbuild.slam.placement.grow import KNN_K, MAX_ROUNDS, GrowthEvidence, PairEvidence, ScanEvidence
 from rmbuild.slam.placement.link import link_components
 from rmbuild.slam.placement.merge import _merge_one as merge_onto
 from rmbuild.slam.placement.model import GrowState
@@ -186,7 +186,8 @@ def _reference(mw: WalkSet, prev: PreviousSolution, held: np.ndarray) -> int:
 
 @dataclass
 class _Locator:
-    """What :class:`ScanEvidence` asks of the fingerprints (as the Wi-Fi source's scan locator)."""
+    """What :class:`ScanEvidence` asks of the fingerprints (as the Wi-Fi source's scan locator); ``rss`` over the
+    APs the free scans saw (:func:`ap_subset`): every distance asked for has a free scan on one side."""
 
     rss: RssMatrix
     row_node: np.ndarray
@@ -229,7 +230,9 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]
-    locator = _Locator(rss, fp.node, free_window_median(rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
+    # every distance the placement asks for has a free scan on one side: the APs the free scans saw suffice
+    free_rss = ap_subset(rss, free_rows)
+    locator = _Locator(free_rss, fp.node, free_window_median(free_rss, meta, free_rows, cfg), cfg.wifi.min_common_aps)
     rf = _rf_model(vicinity.get("rf_model"), walks, rss, meta, free_rows, cfg)
     ties = ContinuitySource(walks, cfg.continuity, rf, rss, fp.node).ties()
     rot = CompassSource(mw, cfg.compass).rotation_priors()
@@ -238,14 +241,14 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     st.comp[held] = 0
     st.method[held] = "previous"
     plog: list[dict] = []
-    pk, pq = vicinity_candidates(locator, meta, free_rows)
+    (pk, pq), held_knn = scan_neighbours(locator, meta, free_rows, held[meta.walk])
     links = Links(pk, pq)
     rng = np.random.default_rng(RANSAC_SEED)
     st = _grow(_HeldPairs(mw, pk, pq, [], cfg.placement), st, mw, rot, prior, plog)
     for _ in range(LINK_ROUNDS):
         n_before = int((st.comp == 0).sum())
         st = _join_and_merge(st, mw, ties, links, rot, prior, cfg, rng, plog)
-        ev = ScanEvidence(mw, locator, cfg.placement)
+        ev = _HeldScanEvidence(mw, locator, cfg.placement, held, held_knn)
         st = _grow(ev, st, mw, rot, prior, plog, restart=True)
         lk, lq = ev.links()
         links = Links(np.r_[links.node_k, lk], np.r_[links.node_q, lq])
@@ -255,18 +258,38 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     return st, (links.node_k, links.node_q), ties, rot, prior, plog
 
 
-def vicinity_candidates(loc: _Locator, meta: RowMeta, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Wi-Fi vicinity candidates of the free walks' scans (``rows``, bool over the fingerprint rows) by the
-    paper's rule (Gu et al. 2017, eq. 9 and the window median): each keeps the CANDIDATES_PER_SCAN scans of
-    other walks nearest in RSS distance that are nearer than its own walk's window median and share enough
-    APs. One block of distance products per BLOCK_ROWS free scans against all scans (the full run's
-    run-matched search compares every scan with every other). Returns node pairs (k, q)."""
+def scan_neighbours(loc: _Locator, meta: RowMeta, rows: np.ndarray, held_rows: np.ndarray):
+    """One pass of distance products for the free walks' scans (``rows``, bool over the fingerprint rows)
+    against all scans, for two things (returned as ((k, q), (best_d, best_c))):
+
+    * the Wi-Fi vicinity candidates by the paper's rule (Gu et al. 2017, eq. 9 and the window median): each
+      free scan keeps the CANDIDATES_PER_SCAN scans of other walks nearest in RSS distance that are nearer
+      than its own walk's window median and share enough APs (node pairs k, q);
+    * each free scan's KNN_K nearest scans among the held walks' (``held_rows``) that share enough APs: the
+      distances (float32, inf where fewer) and their rows (-1), the start of the kNN growth, whose held
+      map never changes (:class:`_HeldScanEvidence`).
+
+    One block per BLOCK_ROWS free scans (the full run's run-matched search compares every scan with every
+    other)."""
+    rss = loc.rss
+    held_cols = np.flatnonzero(held_rows)
+    kk = min(KNN_K, len(held_cols))
+    best_d = np.full((len(rows), KNN_K), np.inf, np.float32)
+    best_c = np.full((len(rows), KNN_K), -1, np.int64)
     out_k, out_q = [], []
     todo = np.flatnonzero(rows)
     for b0 in range(0, len(todo), BLOCK_ROWS):
         r = todo[b0:b0 + BLOCK_ROWS]
-        d, common = loc.rss.block(r)
-        d[(common < loc.min_common) | (meta.walk[r][:, None] == meta.walk[None, :])] = np.inf
+        d, common = rss.block(r)
+        d[common < loc.min_common] = np.inf
+        del common
+        if kk:
+            dh = d[:, held_cols]
+            nb = np.argpartition(dh, kk - 1, axis=1)[:, :kk]
+            best_d[r, :kk] = np.take_along_axis(dh, nb, axis=1)
+            best_c[r, :kk] = held_cols[nb]
+            del dh
+        d[meta.walk[r][:, None] == meta.walk[None, :]] = np.inf
         d[~(d < loc.threshold[r][:, None])] = np.inf
         k = min(CANDIDATES_PER_SCAN, d.shape[1])
         nb = np.argpartition(d, k - 1, axis=1)[:, :k]
@@ -274,7 +297,16 @@ def vicinity_candidates(loc: _Locator, meta: RowMeta, rows: np.ndarray) -> tuple
         out_k.append(np.repeat(loc.row_node[r], k)[ok])
         out_q.append(loc.row_node[nb.ravel()][ok])
     empty = np.zeros(0, np.int64)
-    return (np.concatenate(out_k) if out_k else empty), (np.concatenate(out_q) if out_q else empty)
+    pairs = (np.concatenate(out_k) if out_k else empty), (np.concatenate(out_q) if out_q else empty)
+    return pairs, (best_d, best_c)
+
+
+def ap_subset(rss: RssMatrix, rows: np.ndarray) -> RssMatrix:
+    """``rss`` restricted to the APs some of ``rows`` saw, its squared norms and AP counts kept: the
+    distances of those rows to any row are the full matrix's (a pair's shared APs and dot product need no
+    other AP; equal up to the rounding of the products), the distances between two other rows are not."""
+    aps = rss.b[rows].any(axis=0)
+    return RssMatrix(rss.a[:, aps], rss.b[:, aps], rss.sq, rss.cnt)
 
 
 class _HeldPairs(PairEvidence):
@@ -282,6 +314,23 @@ class _HeldPairs(PairEvidence):
 
     def start_component(self, st: GrowState, seed: int, c_id: int) -> np.ndarray:
         return st.comp == 0
+
+
+class _HeldScanEvidence(ScanEvidence):
+    """kNN scan growth (:class:`ScanEvidence`) that starts from each free scan's nearest held scans found
+    once (:func:`scan_neighbours`) instead of comparing every free scan with every held scan again at
+    each restart: only the scans of free walks placed since are merged in."""
+
+    def __init__(self, walks: WalkSet, sim: _Locator, cfg, held: np.ndarray, held_knn: tuple[np.ndarray, np.ndarray]):
+        super().__init__(walks, sim, cfg)
+        self.held, self.held_knn = held, held_knn
+
+    def start_component(self, st: GrowState, seed: int, c_id: int) -> np.ndarray:
+        placed = super().start_component(st, seed, c_id)
+        if c_id == 0:  # component 0: the held walks and the free walks placed so far
+            self.best_d, self.best_c = (a.copy() for a in self.held_knn)
+            self._new_walks = [w for w in self._new_walks if not self.held[w]]
+        return placed
 
 
 def _join_and_merge(st: GrowState, mw: WalkSet, ties: Ties, links: Links, rot: RotationPriors, prior: np.ndarray,

@@ -101,8 +101,10 @@ class WalkSet:
         active = keep[walk_of]
         dev = (dataset.walks["device_id"].fillna("").astype(str).to_numpy(object) if "device_id" in dataset.walks
                else np.full(len(walk_ids), "", dtype=object))
+        on = active[fingerprints.node]  # the fingerprints of the walks that take part (not copied when all do)
         ws = WalkSet(walk_ids, raw, walk_of, starts, ends, path, poses["t_s"].to_numpy(float),
-                     poses["step"].to_numpy(), keep, yaw, ysig, fingerprints.subset(active[fingerprints.node]), dev)
+                     poses["step"].to_numpy(), keep, yaw, ysig, fingerprints if on.all() else fingerprints.subset(on),
+                     dev)
         return ws, warnings
 
 

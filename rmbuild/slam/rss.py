@@ -27,7 +27,7 @@ class RssMatrix:
     @staticmethod
     def from_fingerprints(fp: Fingerprints, fill_dbm: float) -> RssMatrix:
         det = ~np.isnan(fp.rss_dbm)
-        a = np.where(det, fp.rss_dbm - np.float32(fill_dbm), 0).astype(np.float32)
+        a = np.where(det, fp.rss_dbm - np.float32(fill_dbm), 0).astype(np.float32, copy=False)
         b = det.astype(np.float32)
         return RssMatrix(a, b, np.einsum("ij,ij->i", a, a, dtype=np.float64), b.sum(axis=1, dtype=np.float64))
 

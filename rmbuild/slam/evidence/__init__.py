@@ -1,21 +1,24 @@
-"""Evidence sources of the back end, one module each, behind one interface (:mod:`.base`)."""
+"""Evidence sources of the back end, one module each, behind one interface (:mod:`.base`). The floor plan's
+source (:mod:`.floorplan`, shapely) is imported only when a plan is given."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from rmbuild.config.optimize import OptimizeConfig
-from rmbuild.floorplan import FloorPlan
 from rmbuild.slam.evidence.anchors import AnchorSource
 from rmbuild.slam.evidence.base import EvidenceSource
 from rmbuild.slam.evidence.compass import CompassSource
 from rmbuild.slam.evidence.continuity import ContinuitySource
-from rmbuild.slam.evidence.floorplan import FloorPlanSource
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.problem import WalkSet
 
-__all__ = ["AnchorSource", "CompassSource", "ContinuitySource", "EvidenceSource", "FloorPlanSource", "WifiSource",
-           "default_sources"]
+if TYPE_CHECKING:
+    from rmbuild.floorplan import FloorPlan
+
+__all__ = ["AnchorSource", "CompassSource", "ContinuitySource", "EvidenceSource", "WifiSource", "default_sources"]
 
 
 def default_sources(walks: WalkSet, cfg: OptimizeConfig, anchors: pd.DataFrame | None = None, progress=None,
@@ -25,7 +28,11 @@ def default_sources(walks: WalkSet, cfg: OptimizeConfig, anchors: pd.DataFrame |
     when one is given)."""
     wifi = WifiSource(walks, cfg.wifi, progress, candidates_hook)
     compass = CompassSource(walks, cfg.compass)
-    plan = [FloorPlanSource(walks, floorplan, compass.rotation_priors())] if floorplan is not None else []
+    plan = []
+    if floorplan is not None:
+        from rmbuild.slam.evidence.floorplan import FloorPlanSource
+
+        plan = [FloorPlanSource(walks, floorplan, compass.rotation_priors())]
     return [
         wifi,
         ContinuitySource(walks, cfg.continuity, wifi.rf, wifi.rss, walks.fingerprints.node),
