@@ -45,7 +45,8 @@ def test_report_is_self_contained(ws_report: Path, tmp_path: Path, capsys) -> No
     images = _decode_all(page)
     assert all(im.width > 100 and im.height > 100 for im in images)
     pngs = sorted(p.name for p in (ws / "report").glob("*.png"))
-    assert "walks.png" in pngs and len(pngs) == len(images)
+    assert "walks.png" in pngs and "rf.png" in pngs and len(pngs) == len(images)
+    assert "RF model. How the RSS distance" in page  # the data set's own RF model, plotted
     assert "src=\"http" not in page and "href=\"http" not in page  # nothing fetched from outside
     for needle in ("Key figures", "Configuration used", "[optimize]", "optimised ATE rmse"):
         assert needle in page

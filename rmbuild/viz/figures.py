@@ -314,3 +314,38 @@ def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None) -> Any:
     ax.set_title("optimiser cost per Levenberg-Marquardt iteration"
                  + (f", {n_solves} solves" if n_solves > 1 else ""), fontsize=10)
     return fig
+
+
+def rf_model_figure(model: Mapping[str, float], exponent_auc: Mapping[str, float] | None = None,
+                    exponent: float | None = None) -> Any:
+    """The data set's RF model (``optimize.json`` vicinity.rf_model): the cross-walk RSS distance of near and
+    of far scan pairs as two Gaussians and the distance where they are equally likely; with
+    ``exponent_auc`` a second panel: each powed exponent's within-walk near/far AUC, the one used marked."""
+    fig = _figure(9.6 if exponent_auc else 6.4, 3.4)
+    axes = fig.subplots(1, 2 if exponent_auc else 1, squeeze=False)[0]
+    ax = axes[0]
+    mu = (float(model["near_mu"]), float(model["far_mu"]))
+    sd = (float(model["near_sigma"]), float(model["far_sigma"]))
+    r = np.linspace(max(0.0, mu[0] - 4 * sd[0]), mu[1] + 4 * sd[1], 300)
+    for (m, s), label, color in zip(zip(mu, sd), ("near (< 5 m)", "far (15-30 m)"), ("C2", "C3")):
+        ax.plot(r, np.exp(-0.5 * ((r - m) / s) ** 2) / (s * np.sqrt(2 * np.pi)), color=color, label=label)
+    if "threshold_db" in model:
+        ax.axvline(float(model["threshold_db"]), color="0.3", ls="--", lw=1, label="equally likely")
+    ax.set_xlabel("RSS distance between two walks' scans (dB)")
+    ax.set_ylabel("density")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.set_title(f"RF model (calibrated on {int(model.get('n_near', 0))} / {int(model.get('n_far', 0))} "
+                 "same-walk pairs)", fontsize=10)
+    if exponent_auc:
+        ax2 = axes[1]
+        betas = [float(b) for b in exponent_auc]
+        ax2.plot(betas, list(exponent_auc.values()), marker="o", color="C0")
+        if exponent is not None:
+            ax2.axvline(float(exponent), color="0.3", ls="--", lw=1, label=f"used: β = {exponent:g}")
+            ax2.legend(fontsize=8)
+        ax2.set_xlabel("powed exponent β")
+        ax2.set_ylabel("near / far AUC, same-walk pairs")
+        ax2.grid(alpha=0.3)
+        ax2.set_title("how well each β tells near from far", fontsize=10)
+    return fig

@@ -50,6 +50,8 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("optimize", "factors.odometry", "odometry factors"),
     ("optimize", "factors.vicinity", "vicinity factors"),
     ("optimize", "linked_walks", "walks linked into the map"),
+    ("optimize", "vicinity.rss_exponent", "fingerprints compared as powed RSS, exponent (1 = dBm as read)"),
+    ("optimize", "vicinity.rf_model.threshold_db", "RF model: RSS distance where near and far are equally likely"),
     ("optimize", "components", "connected components"),
     ("optimize", "gauge", "map frame fixed by (se2: one walk's frame; anchors / floorplan: the building's)"),
     ("optimize", "iterations", "optimiser iterations"),
@@ -296,6 +298,16 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
                 "cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy(), solve)),
                 "Cost after each Levenberg-Marquardt iteration of every solve; a dotted line starts the next solve, "
                 "whose graph has other factors (re-selected pairs, rescaled odometry), so its cost jumps."))
+    rf = ((ws.read_report("optimize") or {}).get("vicinity") or {}) if ws.has("optimize") else {}
+    if rf.get("rf_model"):
+        figs.append(ReportFigure(
+            "rf", "RF model", _png(figures.rf_model_figure(rf["rf_model"], rf.get("rss_exponent_auc"),
+                                                            rf.get("rss_exponent"))),
+            "How the RSS distance of two walks' scans relates to how far apart they were, calibrated on the data "
+            "itself (pairs of scans of one walk, whose separation its dead reckoning knows); right: the powed "
+            "exponent's choice (a β other than 1 only when it gains ≥ 0.03 AUC)."
+            + (f" Phones' RSS offsets removed (dB): {rf['device_offsets_db']}." if rf.get("device_offsets_db")
+               else "")))
     return figs, rt
 
 
@@ -390,7 +402,8 @@ def _page(ws: Workspace, figs: list[ReportFigure], missing: dict[str, str], eval
           reports: dict[str, dict | None], walks_html: str = "") -> str:
     by_name = {f.name: f for f in figs}
     sections = ["<h2>Walks</h2>" + _fig_html(by_name["walks"]) + walks_html
-                + (_fig_html(by_name["cost"]) if "cost" in by_name else "")]
+                + (_fig_html(by_name["cost"]) if "cost" in by_name else "")
+                + (_fig_html(by_name["rf"]) if "rf" in by_name else "")]
     sections.append("<h2>Radio map</h2>" + (_fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
                                             else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>"))
     ev_html = "<h2>Localization</h2>"
