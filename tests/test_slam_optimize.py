@@ -190,3 +190,21 @@ def test_anchor_places_a_walk_wifi_cannot_link(venue):
     r2 = optimize(ds, fp2, OptimizeConfig(), anchors=anchors.iloc[:2])
     w2 = r2.walks.set_index("walk_id")
     assert not w2.loc[lone, "linked"] and not w2.loc[lone, "anchored"] and w2.loc[lone, "placement"] == ""
+
+
+def test_large_graph_caps_intermediate_solves(venue, result, monkeypatch):
+    """From LARGE_SOLVE_KEYFRAMES keyframes on, every solve but the budget's last stops after
+    INTERMEDIATE_MAX_ITERATIONS; the result stays close to the uncapped one."""
+    from rmbuild.slam import solve
+
+    ds, fp = venue
+    full, _ = result
+    monkeypatch.setattr(solve, "LARGE_SOLVE_KEYFRAMES", 1)
+    r = optimize(ds, fp, OptimizeConfig())
+    starts = r.stats["solves"] and r.solve_starts
+    per_solve = np.diff(starts + [len(r.cost_history)]) - np.r_[1, np.zeros(len(starts) - 1, int)]
+    assert r.stats["solves"] >= 2
+    assert (per_solve[:-1] <= solve.INTERMEDIATE_MAX_ITERATIONS).all()
+    assert r.stats["iterations"] < full.stats["iterations"]
+    err = trajectory_metrics(r.poses, ds)["landmark_error_m"]["mean"]
+    assert err < trajectory_metrics(full.poses, ds)["landmark_error_m"]["mean"] + 0.5

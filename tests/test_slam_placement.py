@@ -23,7 +23,10 @@ def _rot_known(theta, known, sigma=np.inf):
     return RotationPriors(np.asarray(theta, float), np.asarray(known, bool), np.full(len(theta), sigma))
 
 
-def test_refine_walks_recovers_frames():
+@pytest.mark.parametrize("dense", [False, True])
+def test_refine_walks_recovers_frames(dense, monkeypatch):
+    if dense:  # the dense Cholesky step of many walks gives the sparse LU's frames to rounding
+        monkeypatch.setattr(refine, "DENSE_SOLVE_MIN_VARS", 3)
     rng = np.random.default_rng(0)
     n_w, per = 4, 30
     raw = np.zeros((n_w * per, 3))
@@ -323,3 +326,38 @@ def test_an_se2_fallback_that_contradicts_the_walks_compass_does_not_place_it():
             assert f is not None and f.method == "se2" and np.isclose(f.t[2], 0.5 + dev)
     f, ok = _fit_both(fit_turned_by(np.pi), accept, float("nan"))  # no compass: nothing to contradict
     assert ok and f is not None and f.method == "se2"
+
+
+def test_refine_dense_and_sparse_steps_agree(monkeypatch):
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(1)
+    J = sp.random(400, 90, density=0.05, random_state=2) + sp.identity(90, format="csr")[rng.integers(0, 90, 400)]
+    A = (J.T @ J + sp.identity(90) * 1e-6).tocsc()
+    b = rng.normal(size=90)
+    sparse = refine._solve(A, b)
+    monkeypatch.setattr(refine, "DENSE_SOLVE_MIN_VARS", 3)
+    np.testing.assert_allclose(refine._solve(A, b), sparse, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(A @ sparse, b, atol=1e-8)
+
+
+def test_rf_check_offsets_from_the_upper_triangle_equal_the_full_pass(monkeypatch):
+    """The offsets pass of a venue-month computes each pair of rows once; it finds the same best matches."""
+    from types import SimpleNamespace
+
+    from rmbuild.slam.placement import rfcheck
+    from rmbuild.slam.rfmodel import RFModel
+
+    rng = np.random.default_rng(3)
+    walk_of = np.repeat(np.arange(6), 25)
+    walks = walk_set(np.c_[rng.uniform(0, 30, (150, 2)), np.zeros(150)], walk_of)
+    nodes = np.arange(150)
+    sim = SimpleNamespace(rss=_FakeRss(walks.raw[:, :2], walk_of, loud=2, gain_db=6.0), row_node=nodes,
+                          min_common=3, rf=RFModel(22.0, 3.0, 32.0, 4.0))
+    monkeypatch.setattr(rfcheck, "OFFSET_BLOCK_ELEMS", 150 * 20)  # blocks of 20 rows
+    full = rfcheck.OverlapCheck(walks, sim)
+    monkeypatch.setattr(rfcheck, "SYMMETRIC_MIN_ROWS", 1)
+    sym = rfcheck.OverlapCheck(walks, sim)
+    np.testing.assert_array_equal(sym._best_other_walk_match(), full._best_other_walk_match())
+    np.testing.assert_array_equal(sym.offset_db, full.offset_db)
+    assert full.offset_db[2] > 3.0  # the loud phone's walk

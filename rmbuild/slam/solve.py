@@ -38,6 +38,11 @@ LM_RELATIVE_TOL = 1e-3
 LM_ABSOLUTE_TOL = 1e-6
 LM_LAMBDA_INITIAL = 1e-5
 LM_LAMBDA_FACTOR = 10.0
+# keyframes; from this graph size on (a venue-month of walks, docs/performance.md) a solve that the schedule
+# follows with another stops after INTERMEDIATE_MAX_ITERATIONS: its poses only re-select pairs and re-fit
+# scales, and the next solve starts from them (each iteration eliminates the whole graph, seconds at this size)
+LARGE_SOLVE_KEYFRAMES = 20_000
+INTERMEDIATE_MAX_ITERATIONS = 2
 
 
 @dataclass
@@ -109,9 +114,9 @@ def keyframes(walks, required: np.ndarray, chain_reduction: bool) -> np.ndarray:
 
 
 def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progress: Progress, outer: int,
-                        ordering: str):
+                        ordering: str, max_iterations: int | None = None):
     params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(cfg.solve.max_iterations)
+    params.setMaxIterations(max_iterations or cfg.solve.max_iterations)
     params.setRelativeErrorTol(LM_RELATIVE_TOL)
     params.setAbsoluteErrorTol(LM_ABSOLUTE_TOL)
     params.setOrderingType(ordering)
@@ -146,6 +151,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     out = SolveOutcome(init_xyt, walks.raw, scale, np.zeros(walks.n_walks, bool), np.zeros(walks.n_walks, bool),
                        graph.kf_idx, ordering=ordering)
     settling = np.zeros(walks.n_walks, bool)
+    large = len(graph.kf_idx) >= LARGE_SOLVE_KEYFRAMES
     values = graph.to_values(init_xyt)
     current = init_xyt
     while True:
@@ -156,7 +162,8 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
         if out.first_solve_initial_cost is None:
             out.first_solve_initial_cost = float(g.error(values))
             out.cost_history.append(out.first_solve_initial_cost)
-        values, it = levenberg_marquardt(g, values, cfg, out.cost_history, progress, sched.solves, ordering)
+        cap = INTERMEDIATE_MAX_ITERATIONS if large and sched.solves + 1 < sched.budget else None
+        values, it = levenberg_marquardt(g, values, cfg, out.cost_history, progress, sched.solves, ordering, cap)
         sched.solved()
         out.iterations += it
         current = graph.from_values(values)

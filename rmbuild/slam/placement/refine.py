@@ -29,6 +29,11 @@ GATE_FACTOR = 1.5
 # truth than the compass (docs/optimize.md: ILC F1 rotation error 11.2 -> 7.9 deg)
 SHORT_WALK_M = 40.0
 SHORT_WALK_ROT_SIGMA_SCALE = 0.1
+# unknowns (3 per placed walk); from this many on each Gauss-Newton step is solved by a dense Cholesky
+# factorisation: with hundreds of walks linked to each other the normal matrix fills in and the sparse LU
+# was most of the placement's time (a venue-month, 1,000 walks: 1.5 s a step; 729 unknowns at 12 % fill:
+# 27 ms sparse, 2.6 ms dense; docs/performance.md)
+DENSE_SOLVE_MIN_VARS = 600
 
 
 def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
@@ -39,7 +44,6 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
     unless it has a rotation prior. Returns new T.
     """
     import scipy.sparse as sp  # imported here: ~0.3 s at import, which `optimize --incremental` (no refinement) skips
-    from scipy.sparse.linalg import spsolve
 
     T = T.copy()
     act = np.flatnonzero(active)
@@ -60,15 +64,13 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
         J = sp.vstack([J, Jp]).tocsr()
         res = np.r_[res, e]
         w = np.r_[w, 1.0 / (1.0 + (np.abs(e) / ROBUST_C) ** 2)]
-        A = (J.T @ sp.diags(w) @ J).tolil()
+        A = (J.T @ sp.diags(w) @ J).tocsr()
         g = J.T @ (w * res)
         # gauge: reference position (and rotation without a prior); tiny damping for unconnected walks
         k = 3 * col[ref]
-        A[k, k] += 1e9
-        A[k + 1, k + 1] += 1e9
-        if not np.isfinite(rot_prior[ref]):
-            A[k + 2, k + 2] += 1e9
-        dx = spsolve((A.tocsr() + sp.identity(nv) * 1e-6).tocsc(), -g)
+        gauge = np.zeros(nv)
+        gauge[k:k + (2 if np.isfinite(rot_prior[ref]) else 3)] = 1e9
+        dx = _solve((A + sp.diags(gauge) + sp.identity(nv) * 1e-6).tocsc(), -g)
         if not np.all(np.isfinite(dx)):
             break
         T[act, 0] += dx[0::3]
@@ -77,6 +79,22 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
         if np.max(np.abs(dx)) < 1e-4:
             break
     return T
+
+
+def _solve(A, b: np.ndarray) -> np.ndarray:
+    """A x = b for the symmetric positive definite normal matrix A (sparse, csc): sparse LU below
+    DENSE_SOLVE_MIN_VARS unknowns, a dense Cholesky factorisation from there on (the same solution to
+    rounding, ~1e-12)."""
+    from scipy.sparse.linalg import spsolve
+
+    if A.shape[0] < DENSE_SOLVE_MIN_VARS:
+        return spsolve(A, b)
+    import scipy.linalg as sl
+
+    try:
+        return sl.cho_solve(sl.cho_factor(A.toarray(), check_finite=False), b, check_finite=False)
+    except np.linalg.LinAlgError:  # not positive definite to rounding: the sparse LU pivots
+        return spsolve(A, b)
 
 
 def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):

@@ -49,6 +49,9 @@ MIN_OVERLAP_SCANS = 5
 MAX_REFUTED_SHARE = 0.5
 # entries (rows x all rows) per block of the phone-offset pass: its float64 temporaries stay ~100 MB
 OFFSET_BLOCK_ELEMS = BLOCK_ELEMS // 4
+# fingerprint rows; from this many on (a venue-month) the offset pass computes each pair of rows once (the
+# upper triangle of the symmetric distance matrix; the float32 products then differ by ~1e-6 dB in blocking)
+SYMMETRIC_MIN_ROWS = 20_000
 
 
 def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
@@ -114,11 +117,16 @@ class OverlapCheck:
         n = len(self.row_walk)
         out = np.full(n, np.inf)
         step = max(1, OFFSET_BLOCK_ELEMS // max(n, 1))
+        sym = n >= SYMMETRIC_MIN_ROWS
         for lo in range(0, n, step):
             rows = np.arange(lo, min(lo + step, n))
-            d, common = self.sim.rss.block(rows, slice(None))
-            ok = (common >= self.sim.min_common) & (self.row_walk[rows][:, None] != self.row_walk[None, :])
-            out[rows] = np.where(ok, d, np.inf).min(axis=1)
+            cols = slice(lo, None) if sym else slice(None)
+            d, common = self.sim.rss.block(rows, cols)
+            ok = (common >= self.sim.min_common) & (self.row_walk[rows][:, None] != self.row_walk[None, cols])
+            d = np.where(ok, d, np.inf)
+            out[rows] = np.minimum(out[rows], d.min(axis=1))
+            if sym:  # eq. 9 is symmetric: the block's columns take their minimum over its rows too
+                out[lo:] = np.minimum(out[lo:], d.min(axis=0))
         return out
 
     def evidence(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
