@@ -58,7 +58,7 @@ class WifiConfig:
     # 0 = estimated from the solved pairs after each solve.
     across_ratio: float = bounded(0.0, 0.0, 1.0)
     # remove each device's RSS offset against the most common device (estimated from the data, reported
-    # in optimize.json) before fingerprints are compared; off when all phones read alike.
+    # in optimize.json) before fingerprints are compared; off when all phones read alike. paper: off.
     calibrate_devices: bool = True
     # β of the powed representation fill + 80 dB·((rss − fill) / 80 dB)^β the fingerprints are compared in
     # (strong readings weigh more as β grows); 0 = chosen per data set among 1-2.5 by how well it tells a
@@ -180,11 +180,13 @@ class OptimizeConfig:
 
 
 def paper_config(**overrides) -> OptimizeConfig:
-    """Gu et al.'s published model: every walk at the origin, median-window pairs, Ω_IMU = diag(1, 1, 20),
-    d_min 2 m, d_max 30 m, one LM solve over every step, no compass, no scale, no checks."""
+    """Gu et al.'s published model: every walk at the origin, median-window pairs over the readings as heard,
+    Ω_IMU = diag(1, 1, 20), d_min 2 m, d_max 30 m, one LM solve over every step, no compass, no scale, no
+    checks."""
     cfg = OptimizeConfig(
         odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0, estimate_scale=False),
-        wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, omega=1.0, across_ratio=1.0),
+        wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, omega=1.0, across_ratio=1.0,
+                        calibrate_devices=False, rss_exponent=1.0),
         compass=CompassConfig(use=False),
         continuity=ContinuityConfig(use=False),
         placement=PlacementConfig(method="origin"),
