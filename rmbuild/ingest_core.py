@@ -368,6 +368,19 @@ def _pdr_summary(reports: dict[str, PdrReport]) -> dict:
             for w, r in reports.items()}
 
 
+def _walks_table(raw: RawInput, source: str) -> tuple[pd.DataFrame, list]:
+    """The walks table with :data:`WALK_COLUMNS` (``source`` where the reader left it empty), only the walks
+    that have poses, in the table's order; and the ids of the walks dropped for having none."""
+    walks = raw.walks.copy()
+    for c in WALK_COLUMNS:
+        if c not in walks.columns:
+            walks[c] = ""
+    walks = walks[list(WALK_COLUMNS)]
+    walks["source"] = walks["source"].where(walks["source"] != "", source)
+    has_poses = walks["walk_id"].isin(raw.poses["walk_id"].unique())
+    return walks[has_poses].reset_index(drop=True), walks.loc[~has_poses, "walk_id"].tolist()
+
+
 def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: PdrConfig | None = None,
                   on_walk: Callable[[str], None] | None = None) -> tuple[Dataset, Fingerprints, dict]:
     """Run the PDR on raw IMU, validate, order, attach readings to nodes and average them into per-node
@@ -379,16 +392,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     """
     reports, pdr_warnings = derive_poses(raw, pdr_cfg or PdrConfig(), on_walk)
     codes = validate(raw, cfg)
-    walks = raw.walks.copy()
-    for c in WALK_COLUMNS:
-        if c not in walks.columns:
-            walks[c] = ""
-    walks = walks[list(WALK_COLUMNS)]
-    walks["source"] = walks["source"].where(walks["source"] != "", source)
-    # keep only walks that have poses, in the walks table's order
-    has_poses = walks["walk_id"].isin(raw.poses["walk_id"].unique())
-    dropped_walks = walks.loc[~has_poses, "walk_id"].tolist()
-    walks = walks[has_poses].reset_index(drop=True)
+    walks, dropped_walks = _walks_table(raw, source)
     walk_index = pd.Index(walks["walk_id"])
 
     poses, pose_walk = _order_by_walk(raw.poses, walk_index, codes["poses"])
@@ -415,9 +419,7 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
     wifi = wifi[list(WIFI_COLUMNS)][attached].reset_index(drop=True)
     wifi["rssi_dbm"] = wifi["rssi_dbm"].astype(np.float32)
 
-    fixes = raw.fixes.copy()
-    if "label" not in fixes.columns:
-        fixes["label"] = ""
+    fixes = raw.fixes if "label" in raw.fixes.columns else raw.fixes.assign(label="")
     fixes = fixes[list(FIX_COLUMNS) + [c for c in fixes.columns if c not in FIX_COLUMNS]].reset_index(drop=True)
 
     truth = raw.truth_poses

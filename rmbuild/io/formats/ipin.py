@@ -303,6 +303,20 @@ def raw_imu(log: _Log) -> RawImu:
                                            "yaw": log.line["AHRS"]})
 
 
+def _enu_origin(logs: list[_Log], opts, notes: list[str]) -> tuple[float, float]:
+    """The WGS84 origin (lat, lon) of the local ENU frame of the POSI fixes: the configured one, else the
+    first fix of the first logfile that has one (said in ``notes``), else (0, 0)."""
+    if opts.ipin.origin_lat_deg is not None and opts.ipin.origin_lon_deg is not None:
+        return opts.ipin.origin_lat_deg, opts.ipin.origin_lon_deg
+    first = next((lg for lg in logs if len(lg.num["POSI"])), None)
+    if first is None:
+        return 0.0, 0.0
+    lat0, lon0 = float(first.num["POSI"][0, 2]), float(first.num["POSI"][0, 3])
+    notes.append(f"POSI fixes in a local ENU frame at the first fix of {first.path.name}: lat {lat0:.9f}, "
+                 f"lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg set it)")
+    return lat0, lon0
+
+
 @register
 class IpinReader(Reader):
     name = FORMAT_NAME
@@ -332,17 +346,7 @@ class IpinReader(Reader):
             logs.append(log)
             self.file_done(f)
         notes: list[str] = []
-        # ENU origin for POSI
-        if opts.ipin.origin_lat_deg is not None and opts.ipin.origin_lon_deg is not None:
-            lat0, lon0 = opts.ipin.origin_lat_deg, opts.ipin.origin_lon_deg
-        else:
-            first = next((lg for lg in logs if len(lg.num["POSI"])), None)
-            lat0, lon0 = ((float(first.num["POSI"][0, 2]), float(first.num["POSI"][0, 3])) if first
-                          else (0.0, 0.0))
-            if first is not None:
-                notes.append(f"POSI fixes in a local ENU frame at the first fix of {first.path.name}: "
-                             f"lat {lat0:.9f}, lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg "
-                             "set it)")
+        lat0, lon0 = _enu_origin(logs, opts, notes)
         walks, poses, wifi, fixes, ble = [], [], [], [], []
         wifi_where: list[str] = []
         ble_where: list[str] = []
