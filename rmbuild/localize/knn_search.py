@@ -28,7 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from rmbuild.localize.blas import one_blas_thread
+from rmbuild.blas import one_blas_thread
 
 #: RPs per block of the blocked product (128: ~0.4 of the dense flops on the `large` preset, few calls).
 RP_BLOCK = 128

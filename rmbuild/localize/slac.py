@@ -40,10 +40,10 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 
+from rmbuild.blas import one_blas_thread
 from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
-from rmbuild.localize.blas import one_blas_thread
 from rmbuild.localize.calibration import to_map_units
 
 log = logging.getLogger(__name__)

@@ -91,8 +91,11 @@ def _solve(A, b: np.ndarray) -> np.ndarray:
         return spsolve(A, b)
     import scipy.linalg as sl
 
+    from rmbuild.blas import one_blas_thread
+
     try:
-        return sl.cho_solve(sl.cho_factor(A.toarray(), check_finite=False), b, check_finite=False)
+        with one_blas_thread():  # small and repeated: two threads only wait on each other (rmbuild/blas.py)
+            return sl.cho_solve(sl.cho_factor(A.toarray(), check_finite=False), b, check_finite=False)
     except np.linalg.LinAlgError:  # not positive definite to rounding: the sparse LU pivots
         return spsolve(A, b)
 
