@@ -6,7 +6,8 @@
 - A walk whose readings are offset from the other walks' at the same places (a device offset, e.g. a
   phone reading 10 dB stronger): co-located scans are found without positions, by the strongest AP they
   hear and the agreement of their readings after removing a constant, and the walk's median difference to
-  the other walks is its offset. rmbuild's vicinity factors compare raw RSS, so such a walk links poorly;
+  the other walks is its offset. The optimizer removes offsets per device (``device_id``: the phones'
+  offsets, docs/optimize.md step 1), not per walk, so such a walk of a device shared with others links poorly;
   the ``slac`` localizer calibrates devices (RSS = k·φ + b; He, Chan, Yu and Liu, "Calibration-Free
   Fusion of Step Counter and Wireless Fingerprints for Indoor Localization", UbiComp 2015) only when
   localizing.
@@ -63,8 +64,8 @@ def evidence_warnings(ds: Dataset) -> list[str]:
     codes = _Codes.of(ds)
     return duplicate_walks(ds, codes) + short_walks(ds, codes) + [
         f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
-        "vicinity factors compare raw RSS, so it may stay unlinked; the slac localizer calibrates devices "
-        "when localizing"
+        "the optimizer removes offsets per device (device_id), not per walk, so it may stay unlinked; the slac "
+        "localizer calibrates devices when localizing"
         for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB
     ]
 
