@@ -18,6 +18,7 @@ import json
 import logging
 import os
 import socket
+import time
 from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
@@ -135,9 +136,18 @@ def _info(fd: int) -> dict:
     return info if isinstance(info, dict) else {}
 
 
+# s; how long a refused command waits for the holder's record: a writer records itself just after locking
+HOLDER_RECORD_WAIT_S = 0.2
+
+
 def _holder(fd: int) -> str:
-    """Who holds the lock, for the busy message."""
+    """Who holds the lock, for the busy message (a writer that has just locked gets a moment to record
+    itself; readers record nothing)."""
     info = _info(fd)
+    deadline = time.monotonic() + HOLDER_RECORD_WAIT_S
+    while not info and time.monotonic() < deadline:
+        time.sleep(0.01)
+        info = _info(fd)
     pid, host = info.get("pid"), info.get("host")
     if not isinstance(pid, int) or (host == socket.gethostname() and not _alive(pid)):
         # no writer recorded (or the recorded one is gone): the holders are readers (view, report)
