@@ -39,7 +39,7 @@ import pandas as pd
 from rmbuild import geometry
 from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.errors import InputError
-from rmbuild.slam import devices, powed
+from rmbuild.slam import powed
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import Links, RotationPriors, Ties
 from rmbuild.slam.evidence.compass import HEADING_PRIOR_CAUCHY_K, HEADING_PRIOR_EVERY_N, CompassSource
@@ -224,9 +224,7 @@ def _place(walks: WalkSet, mw: WalkSet, held: np.ndarray, ref: int, cfg: Optimiz
     over joined along continuity ties (turned to the compass first) and, when some were, growth again.
     ``vicinity``: the last optimize's report of the Wi-Fi evidence (its RF model and RSS exponent, which
     the new walks are compared in too)."""
-    fp, _ = devices.rf_fingerprints(mw, cfg.wifi.calibrate_devices)
-    beta = cfg.wifi.rss_exponent or float(vicinity.get("rss_exponent", 0.0))
-    fp, _, _ = powed.for_data(fp, mw, beta, cfg.wifi.fill_dbm, cfg.wifi.min_common_aps)
+    fp = powed.compared(mw, cfg.wifi, cfg.wifi.rss_exponent or float(vicinity.get("rss_exponent", 0.0))).fingerprints
     rss = RssMatrix.from_fingerprints(fp, cfg.wifi.fill_dbm)
     meta = RowMeta(fp.node, mw.walk_of[fp.node], mw.step[fp.node], mw.t_s[fp.node], mw.path[fp.node])
     free_rows = mw.keep[meta.walk] & ~held[meta.walk]

@@ -12,8 +12,12 @@ a dBm-like scale (``fill + range · x**β``), so the RF model and the gates keep
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from rmbuild.config.optimize import WifiConfig
+from rmbuild.slam import devices
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.rfmodel import FAR_M, NEAR_M, same_walk_pairs
 from rmbuild.slam.rss import RssMatrix
@@ -81,3 +85,23 @@ def for_data(fp: Fingerprints, walks: WalkSet, exponent: float, fill_dbm: float,
     (:func:`choose`); and β and the candidates' AUCs."""
     beta, scores = (float(exponent), {}) if exponent > 0 else choose(fp, walks, fill_dbm, min_common)
     return powed(fp, beta, fill_dbm), beta, scores
+
+
+@dataclass(frozen=True)
+class Compared:
+    """The fingerprints the Wi-Fi evidence compares and how they were made: the phones' offsets removed
+    (``offsets_db``, :mod:`rmbuild.slam.devices`), then the powed representation of exponent ``beta``
+    (``auc``: each candidate's AUC when it was chosen here)."""
+
+    fingerprints: Fingerprints
+    offsets_db: dict[str, float]
+    beta: float
+    auc: dict[float, float]
+
+
+def compared(walks: WalkSet, cfg: WifiConfig, exponent: float | None = None) -> Compared:
+    """``walks``' fingerprints as the Wi-Fi evidence compares them; ``exponent`` (> 0) overrides the
+    config's ``rss_exponent`` (the incremental run keeps the exponent its map was built with)."""
+    fp, offsets = devices.rf_fingerprints(walks, cfg.calibrate_devices)
+    fp, beta, auc_ = for_data(fp, walks, exponent or cfg.rss_exponent, cfg.fill_dbm, cfg.min_common_aps)
+    return Compared(fp, offsets, beta, auc_)

@@ -21,7 +21,7 @@ import pandas as pd
 
 from rmbuild import geometry
 from rmbuild.config.optimize import WifiConfig
-from rmbuild.slam import devices, powed
+from rmbuild.slam import powed
 from rmbuild.slam.evidence.base import EvidenceSource, Links, SolveState, Update
 from rmbuild.slam.factors import (
     anisotropic_factor,
@@ -79,9 +79,8 @@ class WifiSource(EvidenceSource):
         self.warnings: list[str] = []
         self.cfg = cfg
         self.walks = walks
-        fp, self.device_offsets_db = devices.rf_fingerprints(walks, cfg.calibrate_devices)
-        fp, self.rss_exponent, self.exponent_auc = powed.for_data(fp, walks, cfg.rss_exponent, cfg.fill_dbm,
-                                                                  cfg.min_common_aps)
+        self.compared = powed.compared(walks, cfg)
+        fp = self.compared.fingerprints
         self.rss = RssMatrix.from_fingerprints(fp, cfg.fill_dbm)
         self.meta = RowMeta(fp.node, walks.walk_of[fp.node], walks.step[fp.node], walks.t_s[fp.node],
                             walks.path[fp.node])
@@ -251,9 +250,9 @@ class WifiSource(EvidenceSource):
         across = self._used[1]
         return {"across_ratio": float(across), "estimated": bool(self.across_auto),
                 "estimated_from_pairs": self.across_n, "rf_model": self.rf.report(),
-                "device_offsets_db": {d: round(v, 2) for d, v in self.device_offsets_db.items()},
-                "rss_exponent": self.rss_exponent,
-                "rss_exponent_auc": {str(b): round(a, 4) for b, a in self.exponent_auc.items()}}
+                "device_offsets_db": {d: round(v, 2) for d, v in self.compared.offsets_db.items()},
+                "rss_exponent": self.compared.beta,
+                "rss_exponent_auc": {str(b): round(a, 4) for b, a in self.compared.auc.items()}}
 
 
 def is_parallel(rel: np.ndarray) -> np.ndarray:
