@@ -64,3 +64,25 @@ def test_append_refuses_known_walks_and_leaves_the_workspace(parts: dict[str, Pa
     assert r.code == 2 and "--force" in r.err
     r = run_cli(capsys, "ingest", "--append", parts["new"], "-w", tmp_path / "nothing")
     assert r.code == 2 and "Traceback" not in r.err
+
+
+def test_appended_ipin_fixes_share_the_first_ingest_frame(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """IPIN fixes are WGS84, put into a local frame at the first fix ingest reads; an appended logfile's fixes
+    must land in the workspace's frame, not one of their own (they were 57 m off on IPIN −2)."""
+    import gzip
+
+    logs = sorted((Path(__file__).resolve().parents[1] / "datasets" / "ipin2023" / "logs").glob("*.txt.gz"))
+    assert len(logs) == 2
+    # the second logfile without its first 5 fixes: its own first fix is then 9 m from the first one's
+    lines = gzip.decompress(logs[1].read_bytes()).decode().splitlines(keepends=True)
+    posi = [i for i, line in enumerate(lines) if line.startswith("POSI;")]
+    second = tmp_path / "in" / logs[1].name
+    second.parent.mkdir()
+    second.write_bytes(gzip.compress("".join(x for i, x in enumerate(lines) if i not in posi[:5]).encode()))
+    assert run_cli(capsys, "ingest", logs[0], second, "-w", tmp_path / "all", "-q").code == 0
+    assert run_cli(capsys, "ingest", logs[0], "-w", tmp_path / "ws", "-q").code == 0
+    assert "\norigin_lat_deg = " in (tmp_path / "ws" / "data" / "config.toml").read_text()
+    assert run_cli(capsys, "ingest", "--append", second, "-w", tmp_path / "ws", "-q").code == 0
+    a, b = Workspace.open(tmp_path / "ws").read_dataset().fixes, Workspace.open(tmp_path / "all").read_dataset().fixes
+    assert len(a) == len(b) > 0
+    assert np.abs(a[["x_m", "y_m"]].to_numpy() - b[["x_m", "y_m"]].to_numpy()).max() < 1e-6

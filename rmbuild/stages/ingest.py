@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -84,6 +85,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     raw = reader.read(files, cfg)
     progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
+    pdr_cfg = pinned_origin(pdr_cfg, raw)
     floors = split_floors(raw)
     if floors is not None:
         return _run_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, plan, raw,
@@ -107,6 +109,16 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
         log.warning(msg)
     log_workspace(Workspace.open(workspace), viewer)
     return summary
+
+
+def pinned_origin(pdr_cfg: PdrConfig, raw: RawInput) -> PdrConfig:
+    """``pdr_cfg`` with the WGS84 origin the reader chose for the fixes' local frame (IPIN's first fix) made
+    explicit, so that the config written beside the data reads later input (``ingest --append``,
+    ``localize``) in the same frame; unchanged when the reader chose none."""
+    if raw.enu_origin is None:
+        return pdr_cfg
+    lat, lon = raw.enu_origin
+    return replace(pdr_cfg, ipin=replace(pdr_cfg.ipin, origin_lat_deg=lat, origin_lon_deg=lon))
 
 
 def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan: dict | None,

@@ -96,6 +96,9 @@ class RawInput:
     transitions: list[dict] = field(default_factory=list)
     #: BLE beacon readings (the ``wifi`` columns; ``where`` key "ble"); None: the input has none
     ble: pd.DataFrame | None = None
+    #: (lat, lon) degrees: the WGS84 origin the reader chose itself for the fixes' local frame; ingest writes
+    #: it into the workspace's config so that later reads (``--append``, ``localize``) use the same frame
+    enu_origin: tuple[float, float] | None = None
 
 
 class Reader(ABC):

@@ -414,6 +414,7 @@ class IpinReader(Reader):
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             merge_duplicate_readings=True,
+            enu_origin=None if opts.ipin.origin_lat_deg is not None or not fix_where else (lat0, lon0),
             pressure=pressure,
             ble=pd.concat(ble, ignore_index=True) if ble else None,
             where={
