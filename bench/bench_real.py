@@ -77,13 +77,13 @@ def run_cli(args: list[str], log_path: Path) -> dict:
             "rc": p.returncode}
 
 
-def stage_args(stage: str, src: Path, fmt: str, ws: Path) -> list[str]:
+def stage_args(stage: str, src: Path, fmt: str, ws: Path, config: Path | None = None) -> list[str]:
     if stage == "ingest":
         return ["ingest", str(src), "-w", str(ws), "--format", fmt, "--force", "-q"]
-    return [stage, "-w", str(ws), "--force", "-q"]
+    return [stage, "-w", str(ws), "--force", "-q"] + (["--config", str(config)] if config and stage == "optimize" else [])
 
 
-def run_pipeline(src: Path, fmt: str, ws: Path) -> dict:
+def run_pipeline(src: Path, fmt: str, ws: Path, config: Path | None = None) -> dict:
     """All stages in order on one floor; stops at the first failure (its log's last lines in ``error``)."""
     ws.parent.mkdir(parents=True, exist_ok=True)
     logs = ws.parent / f"{ws.name}.logs"
@@ -91,7 +91,7 @@ def run_pipeline(src: Path, fmt: str, ws: Path) -> dict:
     out: dict = {}
     for stage in STAGES:
         log = logs / f"{stage}.log"
-        r = run_cli(stage_args(stage, src, fmt, ws), log)
+        r = run_cli(stage_args(stage, src, fmt, ws, config), log)
         out[stage] = r
         if r["rc"] != 0:
             out["error"] = f"{stage} exit {r['rc']}: " + " | ".join(log.read_text().strip().splitlines()[-3:])
@@ -430,14 +430,14 @@ def score_workspace(ws: Path) -> dict:
     }
 
 
-def measure_floor(name: str, root: Path, scratch: Path) -> dict:
+def measure_floor(name: str, root: Path, scratch: Path, config: Path | None = None) -> dict:
     rel, fmt = FLOORS[name]
     src = root / rel
     if not src.exists():
         return {"floor": name, "skipped": f"{src} not found"}
     ws = scratch / name.replace("/", "_")
     print(f"[bench-real] {name}: running {' → '.join(STAGES)} in {ws}", flush=True)
-    run = run_pipeline(src, fmt, ws)
+    run = run_pipeline(src, fmt, ws, config)
     out: dict = {"floor": name, "source": rel, "format": fmt, "stages": {s: run[s] for s in STAGES if s in run}}
     if "error" in run:
         out["error"] = run["error"]
@@ -520,10 +520,16 @@ def markdown(result: dict) -> str:
     lines = ["# Real floors: the whole pipeline (`make bench-real`)", "",
              f"Code: {code.get('commit') or '?'}{' (uncommitted changes)' if code.get('dirty') else ''}; "
              f"data: `{result['dataset_root_name']}`; written by `python -m bench.bench_real` on "
-             f"{result['date']}. Default config; every figure per floor in the JSON beside this file.", "",
+             f"{result['date']}. {_config_line(result)}; every figure per floor in the JSON beside this file.", "",
              HEADER]
     lines += [md_row(r) for r in result["floors"]]
     return "\n".join(lines) + "\n" + NOTES
+
+
+def _config_line(result: dict) -> str:
+    cfg = result.get("optimize_config")
+    return "Default config" if not cfg else "Optimize config: " + "; ".join(
+        line.strip() for line in cfg.splitlines() if line.strip() and not line.lstrip().startswith("#"))
 
 
 def code_identity() -> dict:
@@ -553,6 +559,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="real", help="results name: bench/results/NAME.json and NAME.md")
     ap.add_argument("--scratch", type=Path, default=DEFAULT_SCRATCH, help="where the workspaces go")
     ap.add_argument("--jobs", type=int, default=1, help="floors run in parallel")
+    ap.add_argument("--config", type=Path, help="an optimize config (TOML) instead of the defaults, e.g. a "
+                                                "candidate default for bench.lofo")
     a = ap.parse_args(argv)
     root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS)).resolve()
     scratch = a.scratch.resolve()  # the stages run in their log directory
@@ -561,9 +569,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     floors = select_floors(a.floors)
     with ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
-        rows = list(pool.map(lambda f: measure_floor(f, root, scratch), floors))
+        rows = list(pool.map(lambda f: measure_floor(f, root, scratch, a.config.resolve() if a.config else None), floors))
     result = {"code": code_identity(), "dataset_root_name": root.name, "date": time.strftime("%Y-%m-%d"),
-              "floors": rows}
+              "optimize_config": a.config.read_text() if a.config else None, "floors": rows}
     p = write_result(a.out, result)
     md = p.with_suffix(".md")
     md.write_text(markdown(result))

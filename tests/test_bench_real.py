@@ -88,3 +88,27 @@ def test_offset_split_separates_where_a_walk_sits_from_its_shape():
     split = offset_split(wp)
     assert split == {"offset_m": 2.5, "shape_m": 0.5}  # offsets 5 and 0; shapes 0 and 1; c is not linked
     assert offset_split(wp.assign(linked=False)) is None
+
+
+def test_leave_one_floor_out_chooses_on_the_other_floors(tmp_path) -> None:
+    """bench.lofo: each floor's candidate is the one best on the *other* floors (geometric-mean kNN ratio)."""
+    import json
+
+    from bench import lofo
+
+    ratios = {"a": {"F1": 1.0, "F2": 3.0, "F3": 3.0}, "b": {"F1": 4.0, "F2": 1.5, "F3": 1.5}}
+    specs = []
+    for name, per_floor in ratios.items():
+        rows = [{"floor": f, "walks": 10, "linked": 5, "knn": {"ratio": r}, "landmark_m": {"linked_walks": {"mean": 2.0}}}
+                for f, r in per_floor.items()]
+        p = tmp_path / f"{name}.json"
+        p.write_text(json.dumps({"floors": rows}))
+        specs.append(f"{name}={p}")
+    results = lofo.load(specs)
+    floors = ["F1", "F2", "F3"]
+    assert lofo.choose(results, floors, "F1") == "b"  # F2 and F3 favour b
+    assert lofo.choose(results, floors, "F2") == "a"  # F1, F3: a 1.73 vs b 2.45
+    md = lofo.table(results)
+    assert "| F1 | 5/10, 2.0, 1.00 | 5/10, 2.0, 4.00 | b | 4.00 |" in md
+    # the last line: each candidate's geometric mean, then the held-out floors' (b on F1, a on F2 and F3)
+    assert md.splitlines()[-1].endswith(f"| leave one floor out | {lofo.geomean([4.0, 3.0, 3.0]):.2f} |")
