@@ -80,7 +80,8 @@ def run_cli(args: list[str], log_path: Path) -> dict:
 def stage_args(stage: str, src: Path, fmt: str, ws: Path, config: Path | None = None) -> list[str]:
     if stage == "ingest":
         return ["ingest", str(src), "-w", str(ws), "--format", fmt, "--force", "-q"]
-    return [stage, "-w", str(ws), "--force", "-q"] + (["--config", str(config)] if config and stage == "optimize" else [])
+    extra = ["--config", str(config)] if config and stage == "optimize" else []
+    return [stage, "-w", str(ws), "--force", "-q", *extra]
 
 
 def run_pipeline(src: Path, fmt: str, ws: Path, config: Path | None = None) -> dict:
@@ -569,7 +570,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     floors = select_floors(a.floors)
     with ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
-        rows = list(pool.map(lambda f: measure_floor(f, root, scratch, a.config.resolve() if a.config else None), floors))
+        config = a.config.resolve() if a.config else None
+        rows = list(pool.map(lambda f: measure_floor(f, root, scratch, config), floors))
     result = {"code": code_identity(), "dataset_root_name": root.name, "date": time.strftime("%Y-%m-%d"),
               "optimize_config": a.config.read_text() if a.config else None, "floors": rows}
     p = write_result(a.out, result)

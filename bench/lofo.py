@@ -49,7 +49,8 @@ def choose(results: dict[str, dict[str, dict]], floors: list[str], held_out: str
 def table(results: dict[str, dict[str, dict]]) -> str:
     names = list(results)
     floors = [f for f in results[names[0]] if all(f in r for r in results.values())]
-    head = "| floor | " + " | ".join(f"{n}: linked, mean m, kNN ×" for n in names) + " | chosen on the others | its kNN × |"
+    head = ("| floor | " + " | ".join(f"{n}: linked, mean m, kNN ×" for n in names)
+            + " | chosen on the others | its kNN × |")
     lines = [head, "|" + "---|" * (len(names) + 3)]
     held = []
     for f in floors:
@@ -75,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     md = table(load(a.results))
     print(md)
     if a.out:
-        (RESULTS / f"{a.out}.md").write_text("# Leave one floor out (`python -m bench.lofo`)\n\n" + __doc__.split("\n\n")[1]
-                                               + "\n\n" + md)
+        intro = (__doc__ or "").split("\n\n")[1]
+        (RESULTS / f"{a.out}.md").write_text(f"# Leave one floor out (`python -m bench.lofo`)\n\n{intro}\n\n{md}")
     return 0
 
 

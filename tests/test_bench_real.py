@@ -99,8 +99,8 @@ def test_leave_one_floor_out_chooses_on_the_other_floors(tmp_path) -> None:
     ratios = {"a": {"F1": 1.0, "F2": 3.0, "F3": 3.0}, "b": {"F1": 4.0, "F2": 1.5, "F3": 1.5}}
     specs = []
     for name, per_floor in ratios.items():
-        rows = [{"floor": f, "walks": 10, "linked": 5, "knn": {"ratio": r}, "landmark_m": {"linked_walks": {"mean": 2.0}}}
-                for f, r in per_floor.items()]
+        rows = [{"floor": f, "walks": 10, "linked": 5, "knn": {"ratio": r},
+                 "landmark_m": {"linked_walks": {"mean": 2.0}}} for f, r in per_floor.items()]
         p = tmp_path / f"{name}.json"
         p.write_text(json.dumps({"floors": rows}))
         specs.append(f"{name}={p}")
