@@ -43,7 +43,8 @@ def read_radio_map(ws: Workspace) -> RadioMap:
         origin = np.asarray(side["grid"]["origin_xy_m"], dtype=np.float64)
         cell_size = float(side["grid"]["cell_size_m"])
         frame = str(side.get("frame", ""))
-    except (KeyError, TypeError, ValueError) as e:
+        offsets = {str(k): float(v) for k, v in (side.get("device_offsets_db") or {}).items()}
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise WorkspaceError(f"{ws.path('map.sidecar')}: not a radio-map sidecar ({type(e).__name__}: {e})") from None
     long = ws.read_table("map.cells")
     cells = _cells(long)
@@ -54,7 +55,7 @@ def read_radio_map(ws: Workspace) -> RadioMap:
     hist = _histograms(ws, side, bssids, cells) if ws.exists("map.histograms") else None
     return RadioMap(origin_xy=origin, cell_size_m=cell_size, frame=frame, bssids=bssids, cells=cells,
                     **arrays, nodes=nodes, node_xy=node_xy, node_walk=node_walk, config=read_map_config(ws),
-                    histograms=hist)
+                    histograms=hist, device_offsets_db=offsets)
 
 
 def _cells(long: pd.DataFrame) -> pd.DataFrame:

@@ -15,7 +15,7 @@ The grid is axis-aligned in the map frame: cell (ix, iy) covers [ox + ix·s, ox 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -51,7 +51,9 @@ class RadioMap:
     detected); ``n_walks`` int32. ``cells``: DataFrame with :data:`CELL_COLUMNS`.
     ``nodes``: the map nodes' :class:`Fingerprints`; ``node_xy`` float64 (len(nodes), 2) their positions;
     ``node_walk`` their walk labels. ``histograms``: per (cell, walking direction, AP) RSS histograms of the
-    visited cells (:mod:`rmbuild.radiomap.histogram`).
+    visited cells (:mod:`rmbuild.radiomap.histogram`). ``device_offsets_db``: device -> the offset (dB)
+    taken off its readings before rasterising (:mod:`rmbuild.radiomap.devices`); queries of those devices
+    are corrected alike; empty: readings as heard.
     """
 
     origin_xy: np.ndarray
@@ -69,6 +71,7 @@ class RadioMap:
     node_walk: np.ndarray
     config: MapConfig
     histograms: HistogramLayer | None = None
+    device_offsets_db: dict[str, float] = field(default_factory=dict)
 
     @property
     def n_cells(self) -> int:
@@ -174,6 +177,7 @@ class RadioMap:
             "not_detected_value": UJI_NOT_DETECTED,
             "std": "unbiased (T-1 denominator); NaN/null when T = 1",
             "histograms": None if self.histograms is None else self.histograms.sidecar(),
+            "device_offsets_db": dict(self.device_offsets_db),
             "config": dataclasses.asdict(self.config),
             "config_toml": to_toml(self.config, "map"),
         }

@@ -12,6 +12,7 @@ import pandas as pd
 from rmbuild.config import EvaluateConfig, MapConfig, load_stage_config_text, to_toml
 from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace
+from rmbuild.radiomap import devices
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.stages.mapping import built_positions
@@ -86,6 +87,7 @@ def _run(ws: Workspace, cfg: EvaluateConfig, map_cfg: MapConfig, test_walks: lis
     ds = ws.read_dataset()
     fp = ws.read_fingerprints()
     xy, info = built_positions(ws, ds, map_cfg)
+    ds = devices.corrected(ds, info["device_offsets_db"])  # maps and queries in the reference phone's scale
     if test_walks:
         known = set(ds.walks["walk_id"].astype(str))
         unknown = [w for w in test_walks if w not in known]

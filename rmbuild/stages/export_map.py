@@ -12,6 +12,7 @@ from rmbuild.config import MapConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import ARTEFACTS, StageWriter, Workspace, level_of_floor
+from rmbuild.radiomap import devices
 from rmbuild.radiomap.build import CELL_COLUMNS, RadioMap
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -66,7 +67,9 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             info.update(extra)
     progress.phase("rasterising")
     walk_of_node = ds.poses["walk_id"].astype(str).to_numpy()
-    rm = build_radio_map(ds.wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    offsets = info["device_offsets_db"]
+    rm = build_radio_map(devices.corrected(ds, offsets).wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    rm.device_offsets_db = offsets
     ble_rm, ble_skipped = _ble_map(ds.ble, xy, walk_of_node, cfg, rm)
     t_build = time.perf_counter() - t0
     plan_doc = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None

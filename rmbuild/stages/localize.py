@@ -34,6 +34,7 @@ import pandas as pd
 from rmbuild.config import EvaluateConfig, IngestConfig, PdrConfig, load_stage_config_text
 from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.radiomap import devices
 from rmbuild.radiomap.build import RadioMap
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
 from rmbuild.types import Dataset
@@ -92,6 +93,7 @@ def run(
             progress.phase("building the map of the other walks")
             rm, hold_note = held_out_map(ws, ds)
             geo = _georef(ws, rm, out, floor)
+        ds = devices.corrected(ds, rm.device_offsets_db)  # the map's phones' offsets on their queries too
         query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
         if new.kind == "scans":
             query.steps = None
@@ -144,7 +146,8 @@ def held_out_map(ws: Workspace, new: Dataset) -> tuple[RadioMap, str]:
                          str(ws.root))
     map_cfg = read_map_config(ws)
     xy, info = built_positions(ws, ds, map_cfg)
-    em = evaluation_maps(ds, fp, xy, map_walks, info["gauge"], map_cfg)
+    em = evaluation_maps(devices.corrected(ds, info["device_offsets_db"]), fp, xy, map_walks, info["gauge"], map_cfg)
+    em.maps["built"].device_offsets_db = info["device_offsets_db"]
     se2 = em.alignment.get("built_se2")
     if se2:
         note = (f"evaluate's built map of the other {len(map_walks)} walks: SE(2) from their placed nodes to the "

@@ -10,13 +10,16 @@ from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.evaluate.trajectory import align_se2, interpolate_xy
 from rmbuild.io.anchors import Anchors
 from rmbuild.io.workspace import Workspace
+from rmbuild.radiomap import devices
 from rmbuild.types import BUILDING_FRAME_GAUGES, Dataset
 
 
 def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndarray, dict]:
     """(n_nodes, 2) optimised positions (NaN for walks left out) and a dict describing the frame.
 
-    The frame is "building" when optimize used anchors, otherwise the reference walk's own frame.
+    The frame is "building" when optimize used anchors, otherwise the reference walk's own frame;
+    ``device_offsets_db``: the phones' offsets optimize estimated (non-zero ones; the built map and its
+    queries take them off, :mod:`rmbuild.radiomap.devices`).
     """
     ws.require("optimize")
     if ws.stale_inputs("optimize"):
@@ -28,7 +31,8 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     xy = poses[["x_m", "y_m"]].to_numpy(dtype=float).copy()
     report = ws.read_report("optimize") or {}
     walks = ws.read_table("optimize.walks")
-    info: dict = {"gauge": report.get("gauge", "se2"), "left_out_walks": []}
+    info: dict = {"gauge": report.get("gauge", "se2"), "left_out_walks": [],
+                  "device_offsets_db": devices.nonzero((report.get("vicinity") or {}).get("device_offsets_db"))}
     if "linked" in walks and not cfg.include_unlinked_walks:
         # walks placed neither by Wi-Fi links nor by anchors are left out
         placed = walks["linked"].astype(bool)
