@@ -143,9 +143,14 @@ def read_walks(inputs: Sequence[str | Path], workspace: MapWorkspace | None = No
 
 def scans(dataset: Dataset, radio_map: RadioMap | None = None, walk_ids: Sequence[str] | None = None) -> Query:
     """Every Wi-Fi scan (readings sharing walk and time) of ``dataset`` as a Query, columns in the map's AP
-    order; walks with poses carry their PDR steps (for SLAC, PFL and the *_kf localizers)."""
+    order, the scans of a phone the map lists in ``device_offsets_db`` in the map's scale (its offset taken
+    off); walks with poses carry their PDR steps (for SLAC, PFL and the *_kf localizers)."""
+    from rmbuild.radiomap import devices
+
     ids = [str(w) for w in (walk_ids if walk_ids is not None else dataset.walk_ids())]
     bssids = None if radio_map is None else radio_map.bssids
+    if radio_map is not None:
+        dataset = devices.corrected(dataset, radio_map.device_offsets_db)
     q = Query.from_dataset(dataset, ids, bssids, unit="scan")
     if len(dataset.poses) == 0:
         q.steps = None
