@@ -157,3 +157,11 @@ def test_a_few_queries_at_once_equal_the_batch():
     batch = loc.kneighbors(q)[1]
     for n in (1, 2, 5, knn_search.FEW_QUERIES, knn_search.FEW_QUERIES + 1):
         np.testing.assert_array_equal(loc.kneighbors(q[:n])[1], batch[:n])
+
+
+def test_one_at_a_time_with_fewer_rps_than_candidates():
+    """K + margin at least the RPs: every RP a candidate, one query at a time and in a batch."""
+    ref, q = _field(n_rp=20, n_q=12, seed=9)
+    for k in (12, 19):  # K + 8 >= 20 RPs
+        _check_sets(ref, q, k, one_at_a_time=True)
+        _check_sets(ref, q, k)
