@@ -44,6 +44,9 @@ FEW_QUERIES = 8
 THREADS = min(2, os.cpu_count() or 1)
 #: float32 elements of the (RP, query) distance matrix per chunk of queries (8 MB).
 CHUNK_ELEMS = 1 << 21
+#: ``‖a_r‖²`` of the padding rows: never among the nearest, and finite (an inf met a 0 of the padding of
+#: OpenBLAS's AVX-512 kernels: NaN and a RuntimeWarning)
+PAD_SQ = 1e30
 #: float32 holds every integer of magnitude below this exactly.
 F32_EXACT = float(1 << 24)
 
@@ -77,7 +80,7 @@ class SparseL2Shortlist:
         self.n_pad = -(-n_rp // GROUP) * GROUP
         ap = np.zeros((self.n_pad, n_ap), dtype=np.float32)
         ap[:n_rp] = a[self.perm]
-        sq = np.full(self.n_pad, np.inf, dtype=np.float32)
+        sq = np.full(self.n_pad, PAD_SQ, dtype=np.float32)
         sq[:n_rp] = (a[self.perm].astype(np.float64) ** 2).sum(axis=1)
         self.sq = sq
         self.wt = np.ascontiguousarray(-2.0 * a.T, dtype=np.float32)  # (n_ap, n_rp), original order: one query
@@ -116,7 +119,7 @@ class SparseL2Shortlist:
         return ok[:, None] & self.int_rows[cand]
 
     def _distances(self, aq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding), and
+        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (PAD_SQ on the padding), and
         (n_pad / GROUP, nq) the minimum of each group of GROUP rows, taken while a block is in cache."""
         nq = len(aq)
         aqt = np.empty((self.n_ap + 1, nq), dtype=np.float32)  # the query's a, then a row of ones
