@@ -3,9 +3,9 @@
 The neighbour search shortlists ``K + margin`` candidates per query in float32, then re-ranks the shortlist
 exactly in float64 (in a batch, only the entries whose float32 value may be rounded: with integer dBm the
 float32 products are exact), so neighbours and distances equal a float64 brute-force search (up to exact
-ties). The
-default (fill, euclidean) shortlist exploits sparse fingerprints (:mod:`rmbuild.localize.knn_search`); the
-other metrics use dense float32 matrix products. Throughput against scikit-learn: bench/bench_map.py.
+ties). The default (fill, euclidean) shortlist exploits sparse fingerprints
+(:mod:`rmbuild.localize.knn_search`); the other metrics use dense float32 matrix products. Throughput
+against scikit-learn: bench/bench_map.py.
 
 With ``a = rss − fill`` (0 where missing) and ``b`` the detection indicator:
 

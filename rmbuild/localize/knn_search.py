@@ -19,7 +19,7 @@ smallest minima (any of the ``c`` nearest RPs lies in one of them, ties aside), 
 those groups' entries. Both levels partition int64 keys that order like (float32 value, index)
 (:func:`sort_keys`): one ``np.partition`` gives the indices with the values, where partitioning the values
 and finding their indices again by a mask cost twice as much. The float32 shortlist is meant to be
-re-ranked exactly by the caller (or used as it is where it is exact: :func:`exact_in_float32`). Measured
+re-ranked exactly by the caller (or used as it is where it is exact: :meth:`SparseL2Shortlist.exact`). Measured
 against scikit-learn in bench/bench_map.py.
 """
 
