@@ -155,6 +155,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     kf = keyframes(walks, req, cfg.solve.chain_reduction)
     graph = _Graph(walks, kf, static, cfg)
     ocfg = cfg.odometry
+    iterative = len(graph.kf_idx) >= ITERATIVE_MIN_KEYFRAMES
     sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, schedule.SCALE_ROUNDS_MAX)
     ordering = "COLAMD" if (~walks.keep).any() or len(graph.kf_idx) < METIS_MIN_POSES else "METIS"
     scale = np.ones(walks.n_walks)
@@ -162,7 +163,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
                        graph.kf_idx, ordering=ordering)
     settling = np.zeros(walks.n_walks, bool)
     large = len(graph.kf_idx) >= LARGE_SOLVE_KEYFRAMES
-    walk_of_kf = walks.walk_of[graph.kf_idx] if len(graph.kf_idx) >= ITERATIVE_MIN_KEYFRAMES else None
+    walk_of_kf = walks.walk_of[graph.kf_idx] if iterative else None
     out.ordering = "walk-PCG" if walk_of_kf is not None else ordering
     values = graph.to_values(init_xyt)
     current = init_xyt

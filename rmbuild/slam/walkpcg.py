@@ -5,13 +5,14 @@ the dense cliques cost tens of seconds per step (docs/performance.md). Here each
 ``(JᵀJ + λI) δ = Jᵀb`` (gtsam's whitened, robustly weighted linearisation) is solved by preconditioned
 conjugate gradients. The preconditioner is two-level, the walks being its subdomains:
 
-- fine: each walk's own block of the system (its odometry chain, its priors, its pairs' diagonal terms),
-  factorised exactly (one sparse LU of the walk-block-diagonal matrix; no fill between walks);
+- fine: each walk's chain (its odometry between successive keyframes, its priors, its pairs' diagonal
+  terms), a banded matrix factorised exactly (LAPACK's banded Cholesky: no fill);
 - coarse: the rigid motion of each walk (3 unknowns per walk), solved densely — what a walk's own block
   leaves free and only the pairs between walks fix.
 
-They are combined symmetrically (coarse, then the walks on what the coarse correction left, then coarse
-again), so that a walk whose own block is nearly singular in its rigid motion (no prior) does no harm.
+They are combined as deflation (A-DEF2: the walks' solve, then the coarse correction of its residual; CG
+starts from the coarse solution), so that a walk whose chain alone is nearly singular in its rigid motion (no
+prior) does no harm.
 """
 
 from __future__ import annotations
@@ -20,11 +21,13 @@ import gtsam
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
+
+from rmbuild.blas import one_blas_thread
 
 # conjugate-gradient iterations per LM step at most, and the residual reduction that ends them
 CG_MAX_ITERATIONS = 200
 CG_RELATIVE_TOL = 1e-6
+BAND = 5  # a keyframe's 3 unknowns and its successor's: the upper bandwidth of a walk's chain
 
 
 class _System:
@@ -32,26 +35,23 @@ class _System:
 
     def __init__(self, H: sp.csr_matrix, walk_col: np.ndarray, Z: sp.csr_matrix):
         self.H = H
-        coo = H.tocoo()
-        same = walk_col[coo.row] == walk_col[coo.col]
-        B = sp.csc_matrix((coo.data[same], (coo.row[same], coo.col[same])), shape=H.shape)
-        self.lu = splu(B, permc_spec="MMD_AT_PLUS_A")
+        self.band = _walk_band(H, walk_col)
         self.Z = Z
-        E = (Z.T @ (H @ Z)).toarray()
-        self.E = scipy.linalg.cho_factor(E)
+        self.E = scipy.linalg.cho_factor((Z.T @ (H @ Z)).toarray())
 
     def coarse(self, r: np.ndarray) -> np.ndarray:
         return self.Z @ scipy.linalg.cho_solve(self.E, self.Z.T @ r)
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
-        y = self.coarse(r)
-        y += self.lu.solve(r - self.H @ y)
-        return y + self.coarse(r - self.H @ y)
+        """The walks' band solve, then the coarse correction of what it leaves (deflation's A-DEF2: one coarse
+        solve per iteration; with CG started from the coarse solution)."""
+        t = scipy.linalg.cho_solve_banded((self.band, False), r)
+        return t + self.coarse(r - self.H @ t)
 
     def solve(self, g: np.ndarray) -> tuple[np.ndarray, int]:
-        """CG from zero; returns (δ, iterations)."""
-        x = np.zeros_like(g)
-        r = g.copy()
+        """CG from the coarse solution; returns (δ, iterations)."""
+        x = self.coarse(g)
+        r = g - self.H @ x
         z = self.precondition(r)
         p = z.copy()
         rz = r @ z
@@ -67,6 +67,18 @@ class _System:
             rz, rz_old = r @ z, rz
             p = z + (rz / rz_old) * p
         return x, CG_MAX_ITERATIONS
+
+
+def _walk_band(H: sp.csr_matrix, walk_col: np.ndarray) -> np.ndarray:
+    """The upper band (LAPACK's banded Cholesky factor) of each walk's chain: H's entries between a keyframe and
+    itself or its successor in the same walk. Dropping the others (cross-walk terms, a within-walk pair's
+    coupling of keyframes further apart) drops whole off-diagonal blocks of factors, so what is left stays
+    positive definite; CG makes up for them."""
+    coo = sp.triu(H, format="coo")
+    keep = (walk_col[coo.row] == walk_col[coo.col]) & (coo.col // 3 - coo.row // 3 <= 1)
+    ab = np.zeros((BAND + 1, H.shape[0]))
+    ab[BAND + coo.row[keep] - coo.col[keep], coo.col[keep]] = coo.data[keep]
+    return scipy.linalg.cholesky_banded(ab, lower=False)
 
 
 def rigid_basis(xyt: np.ndarray, walk: np.ndarray, n_walks: int) -> sp.csr_matrix:
@@ -120,7 +132,15 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     """LM over Pose2 ``values`` (keys in ascending order, ``walk`` (n,) the walk of each) with each damped
     step solved by :class:`_System`'s CG; ``hook(iteration, cost_before, cost_after)`` after each accepted
     step. Stops as gtsam's LM: the iteration cap, a relative or absolute decrease below the tolerances, or
-    lambda past LAMBDA_UPPER. Returns (values, iterations)."""
+    lambda past LAMBDA_UPPER. Returns (values, iterations). BLAS runs on one thread (its products here are
+    vectors against a matrix: two threads made the 150k case's CG 6x slower with the other core busy)."""
+    with one_blas_thread():
+        return _levenberg_marquardt(graph, values, walk, n_walks, max_iterations, lambda_initial, lambda_factor,
+                                    relative_tol, absolute_tol, hook)
+
+
+def _levenberg_marquardt(graph, values, walk, n_walks, max_iterations, lambda_initial, lambda_factor,
+                         relative_tol, absolute_tol, hook) -> tuple[gtsam.Values, int]:
     keys = [int(k) for k in values.keys()]
     n = len(keys)
     walk3 = np.repeat(walk, 3)
