@@ -2,7 +2,7 @@
 1,000 walks).
 
 Run from the repo root: ``python -m bench.bench_month [--sizes 50000,150000,500000]``. Long (the month's
-simulation alone takes ~3 min, the 500k case longer than the 5 min target): ``make bench`` runs it only with
+simulation alone takes ~3 min, the 500k case ~4 min): ``make bench`` runs it only with
 ``RMBUILD_BENCH_MONTH=1``. Writes bench/results/month.json and month.md.
 
 The month is simulated and ingested once (in a subprocess, into RMBUILD_BENCH_SCRATCH); each size is every
