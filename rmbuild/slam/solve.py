@@ -18,7 +18,7 @@ import gtsam
 import numpy as np
 
 from rmbuild.config.optimize import OptimizeConfig
-from rmbuild.slam import schedule, walkpcg
+from rmbuild.slam import schedule
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import EvidenceSource, SolveState
 from rmbuild.slam.factors import poses_to_values, values_to_poses
@@ -138,6 +138,8 @@ def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progr
                                "cost_after": float(after), "max_iterations": cfg.solve.max_iterations})
 
     if walk is not None:
+        from rmbuild.slam import walkpcg  # scipy: not imported on the incremental path (~0.3 s)
+
         return walkpcg.levenberg_marquardt(graph, values, walk, int(walk.max(initial=-1)) + 1,
                                            max_iterations or cfg.solve.max_iterations, LM_LAMBDA_INITIAL,
                                            LM_LAMBDA_FACTOR, LM_RELATIVE_TOL, LM_ABSOLUTE_TOL, hook)

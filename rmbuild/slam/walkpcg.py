@@ -89,10 +89,10 @@ def rigid_basis(xyt: np.ndarray, walk: np.ndarray, n_walks: int) -> sp.csr_matri
     cy = np.bincount(walk, xyt[:, 1], n_walks) / np.maximum(np.bincount(walk, minlength=n_walks), 1)
     x, y, th = xyt[:, 0] - cx[walk], xyt[:, 1] - cy[walk], xyt[:, 2]
     c, s = np.cos(th), np.sin(th)
-    # Ad(p⁻¹) = [[c, s, c·y − s·x], [−s, c, −s·y − c·x], [0, 0, 1]] for p = (x, y, θ)
+    # Ad(p⁻¹) = [[c, s, s·x − c·y], [−s, c, c·x + s·y], [0, 0, 1]] for p = (x, y, θ)
     blocks = np.zeros((n, 3, 3))
-    blocks[:, 0, 0], blocks[:, 0, 1], blocks[:, 0, 2] = c, s, c * y - s * x
-    blocks[:, 1, 0], blocks[:, 1, 1], blocks[:, 1, 2] = -s, c, -s * y - c * x
+    blocks[:, 0, 0], blocks[:, 0, 1], blocks[:, 0, 2] = c, s, s * x - c * y
+    blocks[:, 1, 0], blocks[:, 1, 1], blocks[:, 1, 2] = -s, c, c * x + s * y
     blocks[:, 2, 2] = 1.0
     rows = np.broadcast_to(3 * np.arange(n)[:, None, None] + np.arange(3)[None, :, None], (n, 3, 3))
     cols = np.broadcast_to(3 * walk[:, None, None] + np.arange(3)[None, None, :], (n, 3, 3))
@@ -100,7 +100,7 @@ def rigid_basis(xyt: np.ndarray, walk: np.ndarray, n_walks: int) -> sp.csr_matri
 
 
 def normal_system(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n: int):
-    """(JᵀJ as csr (3n, 3n), Jᵀb (3n,), ½‖b‖²) of the graph linearised at ``values`` (columns in key order)."""
+    """(JᵀJ as csr (3n, 3n), Jᵀb (3n,)) of the graph linearised at ``values`` (columns in key order)."""
     ijs = graph.linearize(values).sparseJacobian_()
     i, j, v = ijs[0].astype(np.int64) - 1, ijs[1].astype(np.int64) - 1, ijs[2]
     rhs = j == 3 * n
