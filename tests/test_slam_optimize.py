@@ -260,3 +260,26 @@ def test_iterative_solve_follows_the_direct_solve(venue, result, monkeypatch):
     np.testing.assert_allclose(r.cost_history[:first], full.cost_history[:first], rtol=1e-6)
     err = trajectory_metrics(r.poses, ds)["landmark_error_m"]["mean"]
     assert err < trajectory_metrics(full.poses, ds)["landmark_error_m"]["mean"] + 0.5
+
+
+def test_walk_rigid_basis_is_a_rigid_motion_in_gtsams_tangent_spaces():
+    """Each column triple of walkpcg.rigid_basis moves a whole walk rigidly (a translation, a rotation about
+    its centroid), expressed as each pose's local increment (gtsam's Pose2 retraction)."""
+    import gtsam
+
+    from rmbuild.slam.walkpcg import rigid_basis
+
+    rng = np.random.default_rng(1)
+    xyt = rng.normal(size=(8, 3)) * [3.0, 3.0, 1.0]
+    walk = np.repeat([0, 1], 4)
+    Z = rigid_basis(xyt, walk, 2).toarray()
+    eps = 1e-6
+    for w in (0, 1):
+        c = gtsam.Pose2(*xyt[walk == w, :2].mean(axis=0), 0.0)
+        for j in range(3):
+            move = c.compose(gtsam.Pose2(*np.eye(3)[j] * eps)).compose(c.inverse())
+            for i in np.flatnonzero(walk == w):
+                p = gtsam.Pose2(*xyt[i])
+                local = gtsam.Pose2.Logmap(p.between(move.compose(p))) / eps
+                np.testing.assert_allclose(Z[3 * i:3 * i + 3, 3 * w + j], local, atol=1e-6)
+                assert not Z[3 * i:3 * i + 3, 3 * (1 - w) + j].any()
