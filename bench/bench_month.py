@@ -2,14 +2,15 @@
 1,000 walks).
 
 Run from the repo root: ``python -m bench.bench_month [--sizes 50000,150000,500000]``. Long (the month's
-simulation alone takes ~3 min, the 500k case longer than the 5 min target): ``make bench`` runs it only with
+simulation alone takes ~3 min, the 500k case ~4 min): ``make bench`` runs it only with
 ``RMBUILD_BENCH_MONTH=1``. Writes bench/results/month.json and month.md.
 
 The month is simulated and ingested once (in a subprocess, into RMBUILD_BENCH_SCRATCH); each size is every
 k-th walk of it (so the venue and its access points stay the same and only the density of walks grows) and
 runs in a fresh subprocess, watched by this one: a case whose resident memory passes ``--max-gb`` (default 8,
 the target) or whose wall time passes ``--max-min`` is killed, and the phase it had reached is recorded.
-Figures per size: pair search, placement (init), solve, total, peak memory, poses solved, factors, linked
+Figures per size: pair search, placement (init), solve, RF check, total wall and CPU time, peak memory, the
+solver (direct elimination or the walk-preconditioned CG), solves and LM iterations, poses solved, factors, linked
 walks and the linked walks' mean position error after one SE(2) fit (as bench_optimize's `large` case).
 `large` itself runs first (``--no-large`` skips it): on the shared machine only ratios within one run compare.
 """
@@ -64,7 +65,7 @@ def run_case(n: int) -> dict:
 
     with open(_subset_path(n), "rb") as f:
         ds, fp = pickle.load(f)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     seen: set[str] = set()
 
     def progress(phase: str, info: dict) -> None:
@@ -75,13 +76,13 @@ def run_case(n: int) -> dict:
             print(f"PHASE pair_search_done {time.perf_counter() - t0:.1f}", file=sys.stderr, flush=True)
 
     r = optimize(ds, fp, OptimizeConfig(), progress=progress)
-    total = time.perf_counter() - t0
+    total, cpu = time.perf_counter() - t0, time.process_time() - c0
     st = r.stats
     return {"poses": len(ds.poses), "walks": len(ds.walks), "fingerprints": len(fp),
             "poses_solved": st["poses_solved"], "candidates": st["candidates"],
             "vicinity_factors": st["factors"]["vicinity"], "iterations": st["iterations"], "solves": st["solves"],
             "linked_walks": st["linked_walks"], "time_s": {k: round(v, 1) for k, v in st["time_s"].items()},
-            "optimize_total_s": round(total, 1),
+            "optimize_total_s": round(total, 1), "optimize_cpu_s": round(cpu, 1), "solver": st["ordering"],
             "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 0),
             "linked_error": _linked_metrics(r, ds)}
 
@@ -124,8 +125,9 @@ def watched(n: int, max_mb: float, max_s: float) -> dict:
 
 
 def _markdown(res: dict) -> str:
-    rows = ["| poses | walks | fingerprints | poses solved | vicinity factors | pair search s | placement s | "
-            "solve s | total s | peak MB | linked walks | linked mean error m |", "|" + "---|" * 12]
+    rows = ["| poses | walks | fingerprints | poses solved | vicinity factors | solver | solves / iterations | "
+            "pair search s | placement s | solve s | RF check s | total s | CPU s | peak MB | linked walks | "
+            "linked mean error m |", "|" + "---|" * 16]
     for c in res["cases"]:
         if c["status"] != "ok":
             rows.append(f"| ~{c['target_poses']:,} | {c['status']}: {c['reason']} after {c['after_s']} s "
@@ -133,8 +135,11 @@ def _markdown(res: dict) -> str:
             continue
         t, e = c["time_s"], c["linked_error"] or {}
         rows.append(f"| {c['poses']:,} | {c['walks']} | {c['fingerprints']:,} | {c['poses_solved']:,} | "
-                    f"{c['vicinity_factors']:,} | {t['pair_search']:.1f} | {t['init']:.1f} | {t['solve']:.1f} | "
-                    f"{c['optimize_total_s']:.1f} | {c['peak_memory_mb']:,.0f} | {c['linked_walks']}/{c['walks']} | "
+                    f"{c['vicinity_factors']:,} | {c.get('solver', '')} | {c['solves']} / {c['iterations']} | "
+                    f"{t['pair_search']:.1f} | {t['init']:.1f} | {t['solve']:.1f} | "
+                    f"{t.get('rf_check', float('nan')):.1f} | "
+                    f"{c['optimize_total_s']:.1f} | {c.get('optimize_cpu_s', float('nan')):.1f} | "
+                    f"{c['peak_memory_mb']:,.0f} | {c['linked_walks']}/{c['walks']} | "
                     f"{e.get('linked_mean_m', float('nan')):.2f} |")
     return "\n".join(rows) + "\n"
 

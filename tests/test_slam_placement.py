@@ -224,6 +224,11 @@ class _FakeRss:
         d = d * 0.6 + 20.0 + self.gain * loud
         return d.astype(np.float32), np.full(d.shape, 10.0)
 
+    def pairs(self, i, j):
+        d = np.linalg.norm(self.xy[i] - self.xy[j], axis=1) * 0.6 + 20.0
+        d = d + self.gain * ((self.walk_of[i] == self.loud) | (self.walk_of[j] == self.loud))
+        return d.astype(np.float32), np.full(len(d), 10.0)
+
 
 def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
     from types import SimpleNamespace
@@ -252,6 +257,43 @@ def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
     assert list(pl.component[[0, 1, 4]]) == [0, 0, 0] and pl.component[2] > 0 and pl.component[3] > 0
     assert list(pl.method[2:4]) == ["refuted", "refuted"]
     assert refute(placement(true_T), walks, sim) == []  # placed where they belong: nothing refuted
+
+
+def test_rf_check_sampled_at_a_venue_month_judges_as_the_full_check(monkeypatch):
+    """From SAMPLED_MIN_ROWS rows the check samples offsets and neighbours: with samples covering everything
+    its figures equal the full check's; with small samples it refutes the same walks."""
+    from types import SimpleNamespace
+
+    from rmbuild.slam.placement import rfcheck
+    from rmbuild.slam.rfmodel import RFModel
+
+    per = 30
+    raw = np.vstack([np.c_[np.linspace(0, 29, per), np.zeros(per)]] * 5)
+    walk_of = np.repeat(np.arange(5), per)
+    walks = walk_set(np.c_[raw, np.zeros(len(raw))], walk_of)
+    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0], [0, -1, 0]], float)
+    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0], [0, -1, 0]], float)
+    nodes = np.arange(len(raw))
+    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes), walk_of, loud=4, gain_db=8.0), row_node=nodes,
+                          min_common=3, rf=RFModel(22.0, 3.0, 32.0, 4.0))
+
+    def judged(T):
+        pl = Placement(T.copy(), np.zeros(5, np.int64), 0, np.zeros(5, bool), np.array([""] * 5, dtype=object))
+        return rfcheck.refute(pl, walks, sim), pl.rf_log_lr
+
+    full = judged(placed_T)
+    monkeypatch.setattr(rfcheck, "SAMPLED_MIN_ROWS", 1)
+    monkeypatch.setattr(rfcheck, "OFFSET_SAMPLE_ROWS", per)
+    monkeypatch.setattr(rfcheck, "OVERLAP_MAX_NEIGHBOURS", len(raw))
+    covering = judged(placed_T)
+    assert covering[0] == full[0]
+    np.testing.assert_allclose(covering[1], full[1], rtol=1e-5)
+    monkeypatch.setattr(rfcheck, "OFFSET_SAMPLE_ROWS", 5)
+    monkeypatch.setattr(rfcheck, "OFFSET_MAX_COLUMNS", 40)
+    monkeypatch.setattr(rfcheck, "OVERLAP_MAX_NEIGHBOURS", 3)
+    small = judged(placed_T)
+    assert sorted(small[0]) == sorted(full[0]) == [2, 3]
+    assert judged(true_T)[0] == []
 
 
 def test_rf_check_judges_a_walk_by_the_map_it_was_placed_onto():

@@ -43,6 +43,10 @@ LM_LAMBDA_FACTOR = 10.0
 # scales, and the next solve starts from them (each iteration eliminates the whole graph, seconds at this size)
 LARGE_SOLVE_KEYFRAMES = 20_000
 INTERMEDIATE_MAX_ITERATIONS = 2
+# keyframes; from this graph size on (a venue-month) each LM step is solved by conjugate gradients with the
+# walks as the preconditioner's subdomains (:mod:`rmbuild.slam.walkpcg`) instead of eliminating the graph:
+# a venue walked that densely makes every separator of the elimination cut hundreds of walks
+ITERATIVE_MIN_KEYFRAMES = 25_000
 
 
 @dataclass
@@ -114,7 +118,9 @@ def keyframes(walks, required: np.ndarray, chain_reduction: bool) -> np.ndarray:
 
 
 def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progress: Progress, outer: int,
-                        ordering: str, max_iterations: int | None = None):
+                        ordering: str, max_iterations: int | None = None, walk: np.ndarray | None = None):
+    """gtsam's LM on ``graph`` from ``values``; with ``walk`` (the walk of each value, keys ascending) the
+    same damping and stops with each step solved by :func:`rmbuild.slam.walkpcg.levenberg_marquardt`."""
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(max_iterations or cfg.solve.max_iterations)
     params.setRelativeErrorTol(LM_RELATIVE_TOL)
@@ -131,6 +137,12 @@ def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progr
             progress("solve", {"outer": outer, "iteration": int(it), "cost_before": float(before),
                                "cost_after": float(after), "max_iterations": cfg.solve.max_iterations})
 
+    if walk is not None:
+        from rmbuild.slam import walkpcg  # scipy: not imported on the incremental path (~0.3 s)
+
+        return walkpcg.levenberg_marquardt(graph, values, walk, int(walk.max(initial=-1)) + 1,
+                                           max_iterations or cfg.solve.max_iterations, LM_LAMBDA_INITIAL,
+                                           LM_LAMBDA_FACTOR, LM_RELATIVE_TOL, LM_ABSOLUTE_TOL, hook)
     params.iterationHook = hook
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
     result = opt.optimize()
@@ -145,6 +157,7 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     kf = keyframes(walks, req, cfg.solve.chain_reduction)
     graph = _Graph(walks, kf, static, cfg)
     ocfg = cfg.odometry
+    iterative = len(graph.kf_idx) >= ITERATIVE_MIN_KEYFRAMES
     sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, schedule.SCALE_ROUNDS_MAX)
     ordering = "COLAMD" if (~walks.keep).any() or len(graph.kf_idx) < METIS_MIN_POSES else "METIS"
     scale = np.ones(walks.n_walks)
@@ -152,6 +165,8 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
                        graph.kf_idx, ordering=ordering)
     settling = np.zeros(walks.n_walks, bool)
     large = len(graph.kf_idx) >= LARGE_SOLVE_KEYFRAMES
+    walk_of_kf = walks.walk_of[graph.kf_idx] if iterative else None
+    out.ordering = "walk-PCG" if walk_of_kf is not None else ordering
     values = graph.to_values(init_xyt)
     current = init_xyt
     while True:
@@ -163,7 +178,8 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
             out.first_solve_initial_cost = float(g.error(values))
             out.cost_history.append(out.first_solve_initial_cost)
         cap = INTERMEDIATE_MAX_ITERATIONS if large and sched.solves + 1 < sched.budget else None
-        values, it = levenberg_marquardt(g, values, cfg, out.cost_history, progress, sched.solves, ordering, cap)
+        values, it = levenberg_marquardt(g, values, cfg, out.cost_history, progress, sched.solves, ordering, cap,
+                                         walk_of_kf)
         sched.solved()
         out.iterations += it
         current = graph.from_values(values)

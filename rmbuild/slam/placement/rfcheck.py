@@ -52,6 +52,15 @@ OFFSET_BLOCK_ELEMS = BLOCK_ELEMS // 4
 # fingerprint rows; from this many on (a venue-month) the offset pass computes each pair of rows once (the
 # upper triangle of the symmetric distance matrix; the float32 products then differ by ~1e-6 dB in blocking)
 SYMMETRIC_MIN_ROWS = 20_000
+# fingerprint rows; from this many on (a venue-month, walked over many times) the check samples: each walk's
+# offset from at most OFFSET_SAMPLE_ROWS of its scans against every k-th scan of the data set (at most
+# OFFSET_MAX_COLUMNS: a venue's worth of others), and each scan's overlap from at most OVERLAP_MAX_NEIGHBOURS
+# of its placed neighbours within NEAR_M, evenly spread over them, whose RSS distances are computed once
+# (per pair, not for the walk's rows x all its neighbours) and kept while walks are refuted
+SAMPLED_MIN_ROWS = 25_000
+OFFSET_SAMPLE_ROWS = 16
+OFFSET_MAX_COLUMNS = 20_000
+OVERLAP_MAX_NEIGHBOURS = 32
 
 
 def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
@@ -98,14 +107,24 @@ class OverlapCheck:
         self.walks, self.sim = walks, sim
         self.row_walk = walks.walk_of[sim.row_node]
         self.rows_of = [np.flatnonzero(self.row_walk == w) for w in range(walks.n_walks)]
+        self.sampled = len(self.row_walk) >= SAMPLED_MIN_ROWS
+        self._pairs: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sampled: walk -> its pairs
         self.offset_db = self._walk_offsets()
 
     def _walk_offsets(self) -> np.ndarray:
         """Per walk, how much further (dB) its scans' best matches in other walks are than the data set's
         typical walk's: a phone with another gain looks far from everything, wherever it is placed."""
         best = np.full(self.walks.n_walks, np.nan)
-        dmin = self._best_other_walk_match()
-        for w, rw in enumerate(self.rows_of):
+        rows_of = self.rows_of
+        if self.sampled:
+            rows_of = [rw[np.unique(np.linspace(0, len(rw) - 1, OFFSET_SAMPLE_ROWS).astype(np.int64))] if len(rw)
+                       else rw for rw in rows_of]
+            dmin = np.full(len(self.row_walk), np.inf)
+            rows = np.concatenate(rows_of)
+            dmin[rows] = self._sampled_match(rows)
+        else:
+            dmin = self._best_other_walk_match()
+        for w, rw in enumerate(rows_of):
             if len(rw) and (self.row_walk != w).any():
                 best[w] = float(np.median(dmin[rw])) if np.isfinite(dmin[rw]).any() else np.nan
         off = best - np.nanmedian(best) if np.isfinite(best).any() else best
@@ -129,6 +148,20 @@ class OverlapCheck:
                 out[lo:] = np.minimum(out[lo:], d.min(axis=0))
         return out
 
+    def _sampled_match(self, rows: np.ndarray) -> np.ndarray:
+        """For ``rows``, the RSS distance (dB) of the most similar of every k-th row (OFFSET_MAX_COLUMNS at most)
+        of another walk sharing ``min_common`` APs (inf if none)."""
+        n = len(self.row_walk)
+        cols = np.arange(0, n, -(-n // OFFSET_MAX_COLUMNS))
+        out = np.full(len(rows), np.inf)
+        step = max(1, OFFSET_BLOCK_ELEMS // len(cols))
+        for lo in range(0, len(rows), step):
+            r = rows[lo:lo + step]
+            d, common = self.sim.rss.block(r, cols)
+            ok = (common >= self.sim.min_common) & (self.row_walk[r][:, None] != self.row_walk[None, cols])
+            out[lo:lo + step] = np.where(ok, d, np.inf).min(axis=1)
+        return out
+
     def evidence(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
                  order: np.ndarray | None) -> tuple[OverlapEvidence, np.ndarray]:
         """Walk ``w``'s scans against the scans of the other walks in the map (``in_map``, bool over rows)
@@ -138,6 +171,8 @@ class OverlapCheck:
         none = (OverlapEvidence(0, float("nan")), np.zeros(0, np.int64))
         if not len(rw):
             return none
+        if self.sampled:
+            return self._sampled_evidence(w, xy, tree, in_map, order)
         ok_row = in_map & (self.row_walk != w)
         if order is not None:  # the map the walk was placed onto, not walks placed onto it
             ok_row &= order[self.row_walk] < order[w]
@@ -155,3 +190,44 @@ class OverlapCheck:
             return none
         per_scan = np.nanmedian(llr[seen], axis=1)
         return OverlapEvidence(int(seen.sum()), float(np.mean(per_scan))), np.unique(self.row_walk[cols])
+
+    def _sampled_evidence(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
+                          order: np.ndarray | None) -> tuple[OverlapEvidence, np.ndarray]:
+        """:meth:`evidence` from up to OVERLAP_MAX_NEIGHBOURS neighbours per scan (their log LRs computed at the
+        walk's first judgement; later ones drop the neighbours no longer in the map)."""
+        if w not in self._pairs:
+            self._pairs[w] = self._neighbour_pairs(w, xy, tree, in_map, order)
+        row, col, llr = self._pairs[w]
+        keep = in_map[col]
+        row, col, llr = row[keep], col[keep], llr[keep]
+        if not len(row):
+            return OverlapEvidence(0, float("nan")), np.zeros(0, np.int64)
+        o = np.lexsort((llr, row))  # each scan's log LRs ascending, scans in order: the medians by position
+        row, llr = row[o], llr[o]
+        start = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
+        cnt = np.diff(np.r_[start, len(row)])
+        med = 0.5 * (llr[start + (cnt - 1) // 2] + llr[start + cnt // 2])
+        return OverlapEvidence(len(start), float(np.mean(med))), np.unique(self.row_walk[col])
+
+    def _neighbour_pairs(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
+                         order: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, col, log LR) of walk ``w``'s scans and up to OVERLAP_MAX_NEIGHBOURS of their neighbours each
+        (evenly spread over those within NEAR_M that share ``min_common`` APs)."""
+        rw = self.rows_of[w]
+        ok_row = in_map & (self.row_walk != w)
+        if order is not None:
+            ok_row &= order[self.row_walk] < order[w]
+        rows, cols = [], []
+        for r, h in zip(rw, tree.query_ball_point(xy[rw], NEAR_M)):
+            h = np.asarray(h, np.int64)
+            h = h[ok_row[h]]
+            h = h[np.linalg.norm(xy[h] - xy[r], axis=1) < NEAR_M]
+            if len(h) > OVERLAP_MAX_NEIGHBOURS:
+                h = np.sort(h)[np.linspace(0, len(h) - 1, OVERLAP_MAX_NEIGHBOURS).astype(np.int64)]
+            rows.append(np.full(len(h), r))
+            cols.append(h)
+        row, col = np.concatenate(rows), np.concatenate(cols)
+        d, common = self.sim.rss.pairs(row, col)
+        ok = common >= self.sim.min_common
+        row, col = row[ok], col[ok]
+        return row, col, self.sim.rf.log_lr(d[ok] - self.offset_db[w])
