@@ -230,70 +230,67 @@ class _FakeRss:
         return d.astype(np.float32), np.full(len(d), 10.0)
 
 
-def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
+PER = 30
+# truth: walks 0, 1, 4 on one corridor; 2 and 3 on another, 40 m away; placement lays all on the first.
+# Walk 4's phone reads 8 dB off: far from everything by RSS distance, yet placed right.
+TRUE_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0], [0, -1, 0]], float)
+PLACED_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0], [0, -1, 0]], float)
+
+
+def _two_corridors():
+    """Five 30-scan walks along x and the scan locator of their true places (:data:`TRUE_T`)."""
     from types import SimpleNamespace
 
-    from rmbuild.slam.placement.rfcheck import refute
     from rmbuild.slam.rfmodel import RFModel
 
-    per = 30
-    line = np.c_[np.linspace(0, 29, per), np.zeros(per)]
-    raw = np.vstack([line] * 5)
-    walk_of = np.repeat(np.arange(5), per)
+    raw = np.vstack([np.c_[np.linspace(0, 29, PER), np.zeros(PER)]] * 5)
+    walk_of = np.repeat(np.arange(5), PER)
     walks = walk_set(np.c_[raw, np.zeros(len(raw))], walk_of)
-    # truth: walks 0, 1, 4 on one corridor; 2 and 3 on another, 40 m away; placement lays all on the first.
-    # Walk 4's phone reads 8 dB off: far from everything by RSS distance, yet placed right.
-    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0], [0, -1, 0]], float)
-    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0], [0, -1, 0]], float)
     nodes = np.arange(len(raw))
-    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes), walk_of, loud=4, gain_db=8.0), row_node=nodes,
+    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(TRUE_T, nodes), walk_of, loud=4, gain_db=8.0), row_node=nodes,
                           min_common=3, rf=RFModel(22.0, 3.0, 32.0, 4.0))
+    return walks, sim
 
-    def placement(T):
-        return Placement(T.copy(), np.zeros(5, np.int64), 0, np.zeros(5, bool), np.array([""] * 5, dtype=object))
 
-    pl = placement(placed_T)
+def _placement(T):
+    return Placement(T.copy(), np.zeros(5, np.int64), 0, np.zeros(5, bool), np.array([""] * 5, dtype=object))
+
+
+def test_rf_check_refutes_walks_laid_over_a_place_that_looks_different():
+    from rmbuild.slam.placement.rfcheck import refute
+
+    walks, sim = _two_corridors()
+    pl = _placement(PLACED_T)
     assert sorted(refute(pl, walks, sim)) == [2, 3]
     assert list(pl.component[[0, 1, 4]]) == [0, 0, 0] and pl.component[2] > 0 and pl.component[3] > 0
     assert list(pl.method[2:4]) == ["refuted", "refuted"]
-    assert refute(placement(true_T), walks, sim) == []  # placed where they belong: nothing refuted
+    assert refute(_placement(TRUE_T), walks, sim) == []  # placed where they belong: nothing refuted
 
 
 def test_rf_check_sampled_at_a_venue_month_judges_as_the_full_check(monkeypatch):
     """From SAMPLED_MIN_ROWS rows the check samples offsets and neighbours: with samples covering everything
     its figures equal the full check's; with small samples it refutes the same walks."""
-    from types import SimpleNamespace
-
     from rmbuild.slam.placement import rfcheck
-    from rmbuild.slam.rfmodel import RFModel
 
-    per = 30
-    raw = np.vstack([np.c_[np.linspace(0, 29, per), np.zeros(per)]] * 5)
-    walk_of = np.repeat(np.arange(5), per)
-    walks = walk_set(np.c_[raw, np.zeros(len(raw))], walk_of)
-    true_T = np.array([[0, 0, 0], [0, 1, 0], [0, 40, 0], [0, 41, 0], [0, -1, 0]], float)
-    placed_T = np.array([[0, 0, 0], [0, 1, 0], [0, 0.5, 0], [0, 1.5, 0], [0, -1, 0]], float)
-    nodes = np.arange(len(raw))
-    sim = SimpleNamespace(rss=_FakeRss(walks.world_xy(true_T, nodes), walk_of, loud=4, gain_db=8.0), row_node=nodes,
-                          min_common=3, rf=RFModel(22.0, 3.0, 32.0, 4.0))
+    walks, sim = _two_corridors()
 
     def judged(T):
-        pl = Placement(T.copy(), np.zeros(5, np.int64), 0, np.zeros(5, bool), np.array([""] * 5, dtype=object))
+        pl = _placement(T)
         return rfcheck.refute(pl, walks, sim), pl.rf_log_lr
 
-    full = judged(placed_T)
+    full = judged(PLACED_T)
     monkeypatch.setattr(rfcheck, "SAMPLED_MIN_ROWS", 1)
-    monkeypatch.setattr(rfcheck, "OFFSET_SAMPLE_ROWS", per)
-    monkeypatch.setattr(rfcheck, "OVERLAP_MAX_NEIGHBOURS", len(raw))
-    covering = judged(placed_T)
+    monkeypatch.setattr(rfcheck, "OFFSET_SAMPLE_ROWS", PER)
+    monkeypatch.setattr(rfcheck, "OVERLAP_MAX_NEIGHBOURS", 5 * PER)
+    covering = judged(PLACED_T)
     assert covering[0] == full[0]
     np.testing.assert_allclose(covering[1], full[1], rtol=1e-5)
     monkeypatch.setattr(rfcheck, "OFFSET_SAMPLE_ROWS", 5)
     monkeypatch.setattr(rfcheck, "OFFSET_MAX_COLUMNS", 40)
     monkeypatch.setattr(rfcheck, "OVERLAP_MAX_NEIGHBOURS", 3)
-    small = judged(placed_T)
+    small = judged(PLACED_T)
     assert sorted(small[0]) == sorted(full[0]) == [2, 3]
-    assert judged(true_T)[0] == []
+    assert judged(TRUE_T)[0] == []
 
 
 def test_rf_check_judges_a_walk_by_the_map_it_was_placed_onto():
