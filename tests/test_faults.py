@@ -84,3 +84,23 @@ def test_two_concurrent_runs(full_ws: Path, tmp_path: Path) -> None:
     codes = sorted(p.wait(timeout=300) for p in procs)
     assert codes in ([0, 2], [0, 75]), codes  # 2: the second found the workspace made (no --force)
     assert Workspace.open(fresh).verify("ingest") == []
+
+
+def test_a_stage_directory_is_flushed_to_disk_before_and_after_its_renames(tmp_path, monkeypatch) -> None:
+    """A power cut after the commit must not find the new stage with files the disk never got: every file and
+    directory of the new stage is fsynced before the renames, and the parent directory after them."""
+    from rmbuild.io import atomic
+
+    flushed: list[str] = []
+    real = atomic._fsync_path
+    monkeypatch.setattr(atomic, "_fsync_path", lambda p: (flushed.append(str(p)), real(p)))
+    target = tmp_path / "optimize"
+    with atomic.replacing_dir(target) as tmp:
+        (tmp / "tum").mkdir()
+        (tmp / "report.json").write_text("{}")
+        (tmp / "tum" / "w1.txt").write_text("0 0 0")
+        new = str(tmp)
+    assert (target / "tum" / "w1.txt").read_text() == "0 0 0"
+    assert flushed[:-1] and all(p.startswith(new) for p in flushed[:-1])
+    assert {p[len(new):] for p in flushed[:-1]} == {"/report.json", "/tum/w1.txt", "/tum", ""}
+    assert flushed[-1] == str(tmp_path)  # the renames, after them

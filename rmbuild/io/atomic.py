@@ -108,6 +108,7 @@ def replacing_dir(target: Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    fsync_tree(tmp)  # the new files on disk before the renames make them the stage: a power cut too
     backup = target.parent / f".{target.name}.old-{os.getpid()}"
     if target.exists():
         os.replace(target, backup)
@@ -118,7 +119,24 @@ def replacing_dir(target: Path) -> Iterator[Path]:
             os.replace(backup, target)
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    _fsync_path(target.parent)  # the renames themselves
     shutil.rmtree(backup, ignore_errors=True)
+
+
+def fsync_tree(root: Path) -> None:
+    """Flush every file and directory under ``root`` (and ``root``) to disk."""
+    for dirpath, _, filenames in os.walk(root):
+        for name in filenames:
+            _fsync_path(Path(dirpath) / name)
+        _fsync_path(Path(dirpath))
+
+
+def _fsync_path(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def recover_dir(target: Path) -> None:
