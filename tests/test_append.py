@@ -86,3 +86,20 @@ def test_appended_ipin_fixes_share_the_first_ingest_frame(tmp_path: Path, capsys
     a, b = Workspace.open(tmp_path / "ws").read_dataset().fixes, Workspace.open(tmp_path / "all").read_dataset().fixes
     assert len(a) == len(b) > 0
     assert np.abs(a[["x_m", "y_m"]].to_numpy() - b[["x_m", "y_m"]].to_numpy()).max() < 1e-6
+
+
+def test_appending_ipin_to_a_workspace_without_its_origin_warns(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """A workspace ingested before ingest recorded the fixes' origin: appending IPIN logfiles says that their
+    fixes get a frame of their own (instead of silently mixing frames)."""
+    from rmbuild.stages import ingest
+
+    logs = sorted((Path(__file__).resolve().parents[1] / "datasets" / "ipin2023" / "logs").glob("*.txt.gz"))
+    with monkeypatch.context() as m:
+        m.setattr(ingest, "pinned_origin", lambda cfg, raw: cfg)  # as ingest wrote workspaces before
+        assert run_cli(capsys, "ingest", logs[0], "-w", tmp_path / "old", "-q").code == 0
+    r = run_cli(capsys, "ingest", "--append", logs[1], "-w", tmp_path / "old")
+    assert r.code == 0 and "does not record the WGS84 origin" in r.err
+    assert run_cli(capsys, "ingest", logs[0], "-w", tmp_path / "new", "-q").code == 0
+    r = run_cli(capsys, "ingest", "--append", logs[1], "-w", tmp_path / "new")
+    assert r.code == 0 and "WGS84 origin" not in r.err

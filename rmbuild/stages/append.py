@@ -30,7 +30,7 @@ COUNT_KEYS = ("walks", "poses", "readings", "readings_dropped_outside_walk", "sc
 def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
         progress: Progress | None = None) -> dict:
     """Append the walks of ``inputs`` to ``workspace``; returns the new ingest report."""
-    from rmbuild.stages.localize import ingest_configs, read_input
+    from rmbuild.stages.localize import ingest_configs, read_input, unpinned_origin_warning
 
     if building_floors(workspace) is not None:
         raise InputError("--append adds walks to one floor: ingest --append into the floor's workspace "
@@ -41,6 +41,9 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
     icfg, pcfg = ingest_configs(ws)
     progress.phase("reading the new input")
     new = read_input(inputs, fmt, icfg, pcfg)
+    unpinned = unpinned_origin_warning(pcfg, new)
+    if unpinned:
+        log.warning(unpinned)
     if new.kind != "walks":
         raise InputError("--append needs walks (poses), not bare scans", ", ".join(map(str, inputs)))
     with ws.replacing_ingest() as w:

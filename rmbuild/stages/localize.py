@@ -87,8 +87,10 @@ def run(
             rm = _read_map(ws)
             geo = _georef(ws, rm, out, floor)
         progress.phase("reading the input")
-        new = read_input(inputs, fmt, *ingest_configs(ws))
+        icfg, pcfg = ingest_configs(ws)
+        new = read_input(inputs, fmt, icfg, pcfg)
         ds = new.dataset
+        unpinned = unpinned_origin_warning(pcfg, new)
         if hold_out:
             progress.phase("building the map of the other walks")
             rm, hold_note = held_out_map(ws, ds)
@@ -105,7 +107,7 @@ def run(
             to_map, frame_note = ((lambda xy: xy), hold_note) if rm.frame == "building" else (None, hold_note)
         else:
             to_map, frame_note = truth_to_map_frame(ws, rm) if has_truth else (None, "")
-    warnings = [] if hold_out else _overlap_warning(ds, rm)
+    warnings = ([] if hold_out else _overlap_warning(ds, rm)) + ([unpinned] if unpinned else [])
     for w in warnings:
         log.warning(w)
     progress.phase(f"localizing {len(query)} scans with {name}")
@@ -197,6 +199,18 @@ def ingest_configs(ws: Workspace) -> tuple[IngestConfig, PdrConfig]:
         return IngestConfig(), PdrConfig()
     where = str(ws.path("data.config"))
     return load_stage_config_text("ingest", text, where), load_stage_config_text("pdr", text, where)
+
+
+def unpinned_origin_warning(pdr_cfg: PdrConfig, new: NewInput) -> str | None:
+    """A warning when new IPIN logfiles with fixes are read against a workspace that does not record the
+    WGS84 origin of its own fixes' frame (ingested before ingest wrote it into the config): the new fixes
+    then get a frame of their own."""
+    fixes = new.dataset.fixes
+    if new.reader != "ipin" or pdr_cfg.ipin.origin_lat_deg is not None or fixes is None or not len(fixes):
+        return None
+    return ("the workspace does not record the WGS84 origin of its POSI fixes' frame (ingested before rmbuild "
+            "wrote it into data/config.toml): the new fixes are put into a frame of their own; re-ingest the "
+            "workspace, or set pdr.ipin.origin_lat_deg / origin_lon_deg to the origin its ingest notes name")
 
 
 def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConfig, pdr_cfg: PdrConfig) -> NewInput:
