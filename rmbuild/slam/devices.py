@@ -6,8 +6,9 @@ two such phones look far apart, and walks of one phone are hardly ever linked to
 Each device's offset against the device with the most fingerprints is the median, over the APs both
 heard often, of the difference of their median readings: a venue's devices cover the same space on the
 whole, so what stays of the per-AP differences is the phones' gain difference. The offsets are removed
-from the fingerprints the pair search, placement and the RF check compare (the exported radio map keeps
-the readings as heard).
+from the fingerprints the pair search, placement and the RF check compare; the report lists them
+(``vicinity.device_offsets_db``) and the radio map, ``evaluate`` and ``localize`` take the same offsets off
+the readings (:mod:`rmbuild.radiomap.devices`).
 """
 
 from __future__ import annotations

@@ -140,9 +140,7 @@ class OverlapCheck:
         for lo in range(0, n, step):
             rows = np.arange(lo, min(lo + step, n))
             cols = slice(lo, None) if sym else slice(None)
-            d, common = self.sim.rss.block(rows, cols)
-            ok = (common >= self.sim.min_common) & (self.row_walk[rows][:, None] != self.row_walk[None, cols])
-            d = np.where(ok, d, np.inf)
+            d = self._other_walk_distances(rows, cols)
             out[rows] = np.minimum(out[rows], d.min(axis=1))
             if sym:  # eq. 9 is symmetric: the block's columns take their minimum over its rows too
                 out[lo:] = np.minimum(out[lo:], d.min(axis=0))
@@ -156,11 +154,23 @@ class OverlapCheck:
         out = np.full(len(rows), np.inf)
         step = max(1, OFFSET_BLOCK_ELEMS // len(cols))
         for lo in range(0, len(rows), step):
-            r = rows[lo:lo + step]
-            d, common = self.sim.rss.block(r, cols)
-            ok = (common >= self.sim.min_common) & (self.row_walk[r][:, None] != self.row_walk[None, cols])
-            out[lo:lo + step] = np.where(ok, d, np.inf).min(axis=1)
+            out[lo:lo + step] = self._other_walk_distances(rows[lo:lo + step], cols).min(axis=1)
         return out
+
+    def _other_walk_distances(self, rows: np.ndarray, cols) -> np.ndarray:
+        """RSS distances (dB) of ``rows`` x ``cols`` (indices or a slice), inf where the two rows are of one
+        walk or share fewer than ``min_common`` APs."""
+        d, common = self.sim.rss.block(rows, cols)
+        ok = (common >= self.sim.min_common) & (self.row_walk[rows][:, None] != self.row_walk[None, cols])
+        return np.where(ok, d, np.inf)
+
+    def _map_rows(self, w: int, in_map: np.ndarray, order: np.ndarray | None) -> np.ndarray:
+        """Bool over rows: the scans walk ``w`` is judged against — other walks' in the map, placed before it
+        (``order``; None: all)."""
+        ok_row = in_map & (self.row_walk != w)
+        if order is not None:  # the map the walk was placed onto, not walks placed onto it
+            ok_row &= order[self.row_walk] < order[w]
+        return ok_row
 
     def evidence(self, w: int, xy: np.ndarray, tree: cKDTree, in_map: np.ndarray,
                  order: np.ndarray | None) -> tuple[OverlapEvidence, np.ndarray]:
@@ -173,9 +183,7 @@ class OverlapCheck:
             return none
         if self.sampled:
             return self._sampled_evidence(w, xy, tree, in_map, order)
-        ok_row = in_map & (self.row_walk != w)
-        if order is not None:  # the map the walk was placed onto, not walks placed onto it
-            ok_row &= order[self.row_walk] < order[w]
+        ok_row = self._map_rows(w, in_map, order)
         hits = [h[ok_row[h]] for h in (np.asarray(h, np.int64) for h in tree.query_ball_point(xy[rw], NEAR_M))]
         has = np.array([len(h) > 0 for h in hits])
         if not has.any():
@@ -214,9 +222,7 @@ class OverlapCheck:
         """(row, col, log LR) of walk ``w``'s scans and up to OVERLAP_MAX_NEIGHBOURS of their neighbours each
         (evenly spread over those within NEAR_M that share ``min_common`` APs)."""
         rw = self.rows_of[w]
-        ok_row = in_map & (self.row_walk != w)
-        if order is not None:
-            ok_row &= order[self.row_walk] < order[w]
+        ok_row = self._map_rows(w, in_map, order)
         rows, cols = [], []
         for r, h in zip(rw, tree.query_ball_point(xy[rw], NEAR_M)):
             h = np.asarray(h, np.int64)
