@@ -5,11 +5,19 @@ solve (position differences, sigma PAIR_SIGMA_M, robust weights at the final res
 walk-level refinement), the position ties between walks (their own sigma) and the compass (a rotation
 prior of COMPASS_SIGMA_RAD per walk with one). The covariance of each walk's frame is the pseudo-inverse
 of that information matrix — the gauge left free, so the figure is an error *relative to the map as a
-whole*, as a map aligned to the building by one rigid fit has it. A walk's predicted error combines its
-position sigma with its rotation sigma times its own radius, scaled by CALIBRATION: pairs of consecutive
-scans are not independent, so the raw figure is too small (on the five MS ILC floors the walks' real
-errors were 1.0-4.3 times it, median 3; its rank correlation with them 0.45-0.51 on F1, B1 and F6).
-Walks that are not placed get NaN.
+whole*, as a map aligned to the building by one rigid fit has it. A walk's figure combines its position
+sigma with its rotation sigma times its own radius.
+
+The covariance knows how much evidence holds a walk, not whether the evidence is right: a walk placed by
+a position tie (its previous recording's end) that its own scans contradict got one of the smallest
+figures. So the figure grows with the RF check's disagreement: times exp(RF_INFLATION * (RF_LOG_LR_TRUSTED
+- mean log likelihood ratio)) for a walk whose scans support its place less than RF_LOG_LR_TRUSTED (walks
+the check did not judge: unchanged). Pairs of consecutive scans are not independent, so the covariance
+alone is too small; CALIBRATION scales the product to the walks' median real error (docs/optimize.md: on
+five real floors the median ratio real / predicted was 0.8-3.4 before it, median 2.0; the rank correlation
+with the real per-walk error, each floor with the inflation's two numbers chosen on the other four, went
+from 0.27 / 0.13 / 0.49 / 0.37 / 0.61 to 0.23 / 0.42 / 0.56 / 0.54 / 0.63 on MS ILC site1/F1, site1/F2,
+site2/B1, site2/F6 and IPIN 2023 -2). Walks that are not placed get NaN.
 """
 
 from __future__ import annotations
@@ -23,7 +31,12 @@ from rmbuild.slam.placement.refine import PAIR_SIGMA_M, linearise
 from rmbuild.slam.problem import WalkSet
 
 COMPASS_SIGMA_RAD = 0.1
-CALIBRATION = 3.0
+# the covariance's figure times this: the median real / predicted error on the real floors (module docstring)
+CALIBRATION = 2.0
+# mean log likelihood ratio (near vs far) of a walk's scans from which its placement counts as supported
+RF_LOG_LR_TRUSTED = 2.0
+# growth of the predicted error per unit of mean log likelihood ratio below RF_LOG_LR_TRUSTED
+RF_INFLATION = 0.2
 # walks; above this many placed walks the dense pseudo-inverse is skipped (NaN): O(n^3)
 MAX_WALKS = 1500
 
@@ -39,9 +52,10 @@ def walk_frames(walks: WalkSet, poses: np.ndarray) -> np.ndarray:
 
 
 def predicted_errors(walks: WalkSet, poses: np.ndarray, placed: np.ndarray, pk: np.ndarray, pq: np.ndarray,
-                     ties: Ties, compass: np.ndarray) -> np.ndarray:
+                     ties: Ties, compass: np.ndarray, rf_log_lr: np.ndarray | None = None) -> np.ndarray:
     """(n_walks,) predicted placement error (m) of each ``placed`` walk (module docstring). ``pk``, ``pq``:
-    the cross-walk pairs of the final solve; ``compass``: walks with a trusted compass."""
+    the cross-walk pairs of the final solve; ``compass``: walks with a trusted compass; ``rf_log_lr``: the
+    RF check's mean log likelihood ratio per walk (NaN or None: not judged)."""
     out = np.full(walks.n_walks, np.nan)
     act = np.flatnonzero(placed)
     if len(act) < 2 or len(act) > MAX_WALKS:
@@ -57,8 +71,16 @@ def predicted_errors(walks: WalkSet, poses: np.ndarray, placed: np.ndarray, pk: 
     i = 3 * col[act]
     radius = np.array([geometry.extent_m(walks.raw[walks.starts[w]:walks.ends[w], :2]) for w in act])
     var = C[i, i] + C[i + 1, i + 1] + C[i + 2, i + 2] * radius**2
-    out[act] = CALIBRATION * np.sqrt(np.maximum(var, 0.0))
+    out[act] = CALIBRATION * np.sqrt(np.maximum(var, 0.0)) * rf_inflation(rf_log_lr, walks.n_walks)[act]
     return out
+
+
+def rf_inflation(rf_log_lr: np.ndarray | None, n_walks: int) -> np.ndarray:
+    """(n_walks,) factor >= 1 on each walk's predicted error from its RF check (module docstring)."""
+    if rf_log_lr is None:
+        return np.ones(n_walks)
+    short = np.nan_to_num(RF_LOG_LR_TRUSTED - np.asarray(rf_log_lr, float), nan=0.0)
+    return np.exp(RF_INFLATION * np.maximum(short, 0.0))
 
 
 def _pairs_information(T: np.ndarray, a: np.ndarray, b: np.ndarray, sigma: np.ndarray, placed: np.ndarray,

@@ -1,0 +1,70 @@
+"""The predicted placement error per walk (rmbuild.slam.uncertainty) on a hand-built set of straight walks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rmbuild.slam import uncertainty
+from rmbuild.slam.evidence.base import Ties
+from rmbuild.slam.problem import WalkSet
+
+STEPS = 21  # poses per walk, 1 m apart
+
+
+def three_walks() -> WalkSet:
+    """Three parallel 20 m walks along x, 2 m apart in y, each in its own frame (world = own frame)."""
+    x = np.arange(STEPS, dtype=float)
+    raw = np.vstack([np.c_[x, np.full(STEPS, 0.0), np.zeros(STEPS)] for _ in range(3)])
+    walk_of = np.repeat(np.arange(3), STEPS)
+    starts, ends = np.arange(3) * STEPS, np.arange(1, 4) * STEPS
+    path = np.tile(x, 3)
+    n = len(raw)
+    return WalkSet(["a", "b", "c"], raw, walk_of, starts, ends, path, np.arange(n, dtype=float),
+                   np.tile(np.arange(STEPS), 3), np.ones(3, bool), np.full(n, np.nan), np.full(n, 0.1), None)
+
+
+def poses_of(walks: WalkSet) -> np.ndarray:
+    xyt = walks.raw.copy()
+    xyt[:, 1] += 2.0 * walks.walk_of  # walk w at y = 2 w
+    return xyt
+
+
+def pairs(walks: WalkSet) -> tuple[np.ndarray, np.ndarray]:
+    """a-b linked along the whole walk, b-c only at three nodes near one end."""
+    s = walks.starts
+    ab = np.arange(STEPS)
+    bc = np.arange(3)
+    return np.r_[s[0] + ab, s[1] + bc], np.r_[s[1] + ab, s[2] + bc]
+
+
+def no_ties() -> Ties:
+    return Ties(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+
+
+def predict(rf_log_lr=None, placed=(True, True, True)) -> np.ndarray:
+    walks = three_walks()
+    pk, pq = pairs(walks)
+    return uncertainty.predicted_errors(walks, poses_of(walks), np.array(placed), pk, pq, no_ties(),
+                                        np.zeros(3, bool), rf_log_lr)
+
+
+def test_a_walk_held_by_little_evidence_is_predicted_worse():
+    pred = predict()
+    assert np.isfinite(pred).all() and (pred > 0).all()
+    # c hangs on three pairs at one end of b (its rotation is barely held): ~2x the others (9.6, 9.4, 18.7 m)
+    assert pred[2] > 1.5 * max(pred[0], pred[1])
+    assert pred[0] == pytest.approx(pred[1], rel=0.1)
+
+
+def test_unplaced_walks_get_nan():
+    pred = predict(placed=(True, True, False))
+    assert np.isnan(pred[2]) and np.isfinite(pred[:2]).all()
+
+
+def test_rf_disagreement_raises_the_prediction_and_support_leaves_it():
+    base = predict()
+    llr = np.array([np.nan, uncertainty.RF_LOG_LR_TRUSTED + 1.0, uncertainty.RF_LOG_LR_TRUSTED - 5.0])
+    pred = predict(llr)
+    np.testing.assert_allclose(pred[:2], base[:2], rtol=1e-12)  # not judged / well supported: unchanged
+    assert pred[2] == pytest.approx(base[2] * np.exp(5.0 * uncertainty.RF_INFLATION), rel=1e-9)
