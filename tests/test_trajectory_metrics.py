@@ -9,7 +9,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.evaluate.trajectory import align_se2, ate, heading_alignment_error_deg, trajectory_metrics
+from rmbuild.evaluate.trajectory import (
+    align_se2,
+    ate,
+    heading_alignment_error_deg,
+    landmark_error_unlinked_at_raw,
+    trajectory_metrics,
+)
 
 
 def _rot(t):
@@ -86,3 +92,26 @@ def test_alignment_fitted_on_the_named_walks_only():
     assert fit_a["heading_alignment_error_deg"]["mean"] < 1e-6
     # fitted on all walks, walk a is moved too: its landmark is no longer exact
     assert fit_all["ate_m"]["median"] > 5.0
+
+
+def test_unlinked_walks_count_at_their_raw_placement():
+    """'Never worse than raw' is judged with the unlinked walks where dead reckoning alone puts them: the
+    optimiser's arbitrary frame for walk c (40 m off) must not count, its raw placement (exact here) does."""
+    t = np.arange(20.0)
+    raw = pd.DataFrame({"walk_id": np.repeat(["a", "b", "c"], 20), "step": np.tile(t, 3),
+                        "t_s": np.r_[t, t + 100, t + 200], "x_m": np.tile(t, 3),
+                        "y_m": np.r_[np.zeros(20), np.full(20, 10.0), np.full(20, 20.0)], "heading_rad": 0.0})
+    opt = raw.copy()
+    opt.loc[opt["walk_id"] == "c", "x_m"] += 40.0
+    fixes = pd.DataFrame({"walk_id": ["a", "a", "b", "b", "c", "c"], "t_s": [2.0, 15.0, 102.0, 115.0, 202.0, 215.0],
+                          "x_m": [2.0, 15.0, 2.0, 15.0, 2.0, 15.0], "y_m": [0.0, 0.0, 10.0, 10.0, 20.0, 20.0]})
+    ds = SimpleNamespace(truth_poses=None, fixes=fixes)
+    m = landmark_error_unlinked_at_raw(raw, opt, ds, ["a", "b"])
+    assert m["n"] == 6 and m["mean"] < 1e-9
+    assert trajectory_metrics(opt, ds, fit_walks=["a", "b"])["landmark_error_m"]["mean"] == pytest.approx(40 / 3)
+    # a linked walk placed badly counts as optimised: walk b 3 m off, the fit on a and b shares it out
+    opt.loc[opt["walk_id"] == "b", "y_m"] += 3.0
+    m = landmark_error_unlinked_at_raw(raw, opt, ds, ["a", "b"])
+    assert m["mean"] == pytest.approx(1.5 * 4 / 6, abs=1e-6)
+    assert landmark_error_unlinked_at_raw(raw, opt, ds, ["a", "b", "c"]) is None  # all linked: nothing to add
+    assert landmark_error_unlinked_at_raw(raw, opt, SimpleNamespace(fixes=fixes.iloc[:0]), ["a"]) is None

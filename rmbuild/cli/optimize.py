@@ -82,12 +82,18 @@ def _errors(r: dict, metrics_text) -> None:
     fit = ("each after one rigid fit of all walks together" if r.get("gauge") == "se2" else
            "raw after one rigid fit of all walks together, optimised as placed in the building frame")
     click.echo(f"  errors against {how}, {fit}:")
+    al = r.get("metrics_alignment") or {}
+    some_unlinked = al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]
     for name, text in lines:
         if text:
-            click.echo(f"  {name:9s} {text}")
+            where = " (the unlinked walks where the optimiser left them)" if name == "optimized" else ""
+            click.echo(f"  {name:9s} {text}{where if some_unlinked else ''}")
     lk = (r.get("optimized") or {}).get("landmark_error_fitted_walks_m")
-    al = r.get("metrics_alignment") or {}
-    if lk and al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]:
+    if lk and some_unlinked:
         click.echo(f"  linked walks only ({al['walks']} of {r['walks']}): "
                    f"{metrics_text({'landmark_error_m': lk})}; the unlinked walks keep arbitrary frames and "
                    "are left out of the map")
+        at_raw = (r.get("optimized") or {}).get("landmark_error_unlinked_at_raw_m")
+        if at_raw:
+            click.echo(f"  all walks, the unlinked at their raw placement (against raw above): "
+                       f"{metrics_text({'landmark_error_m': at_raw})}")

@@ -15,7 +15,7 @@ import pandas as pd
 from rmbuild.geometry import align_se2, rotation_angle_rad
 
 __all__ = ["align_se2", "ate", "heading_alignment_error_deg", "interpolate_xy", "landmark_error",
-           "rotation_angle_rad", "trajectory_metrics"]
+           "landmark_error_unlinked_at_raw", "rotation_angle_rad", "trajectory_metrics"]
 
 
 def _stats(err: np.ndarray) -> dict[str, float]:
@@ -90,14 +90,44 @@ def landmark_error(
     """
     if fixes is None or len(fixes) == 0:
         return None
+    return _fix_stats(fix_errors(poses, fixes, world_R, world_t))
+
+
+def fix_errors(poses: pd.DataFrame, fixes: pd.DataFrame, world_R: np.ndarray | None = None,
+               world_t: np.ndarray | None = None) -> np.ndarray:
+    """(len(fixes),) error (m) at each fix as :func:`landmark_error` measures it; NaN where the fix's walk
+    has no estimate at its time."""
     est = estimates_at_fixes(poses, fixes["walk_id"].astype(str).to_numpy(), fixes["t_s"].to_numpy(dtype=float))
     if world_R is not None:
         est = est @ np.asarray(world_R).T + (0 if world_t is None else np.asarray(world_t))
-    ok = np.isfinite(est).all(axis=1)
-    if ok.sum() == 0:
+    return np.linalg.norm(est - fixes[["x_m", "y_m"]].to_numpy(dtype=float), axis=1)
+
+
+def _fix_stats(err: np.ndarray) -> dict[str, float] | None:
+    err = err[np.isfinite(err)]
+    if len(err) == 0:
         return None
-    err = np.linalg.norm(est[ok] - fixes[["x_m", "y_m"]].to_numpy(dtype=float)[ok], axis=1)
-    return {"mean": float(err.mean()), "std": float(err.std()), "max": float(err.max()), "n": int(ok.sum())}
+    return {"mean": float(err.mean()), "std": float(err.std()), "max": float(err.max()), "n": int(len(err))}
+
+
+def landmark_error_unlinked_at_raw(raw_poses: pd.DataFrame, opt_poses: pd.DataFrame, dataset, linked,
+                                   align: bool = True) -> dict[str, float] | None:
+    """Landmark error of all walks with the walks not in ``linked`` counted at their raw placement: the
+    linked walks' fixes on ``opt_poses`` (one SE(2) fit on the linked walks when ``align``, else as placed),
+    the others' on ``raw_poses`` (one SE(2) fit on all walks, as the raw figure has it). An unlinked walk's
+    optimised frame is arbitrary and it is left out of the map, so it counts where dead reckoning alone puts
+    it: the figure that says whether optimising made the walks worse than raw. None without fixes or when
+    every walk is linked."""
+    fixes = getattr(dataset, "fixes", None)
+    if fixes is None or len(fixes) == 0:
+        return None
+    mine = fixes["walk_id"].astype(str).isin([str(w) for w in linked]).to_numpy()
+    if mine.all():
+        return None
+    R_o, t_o = _alignment(opt_poses, dataset, linked) if align else (np.eye(2), np.zeros(2))
+    R_r, t_r = _alignment(raw_poses, dataset, None)
+    err = np.r_[fix_errors(opt_poses, fixes[mine], R_o, t_o), fix_errors(raw_poses, fixes[~mine], R_r, t_r)]
+    return _fix_stats(err)
 
 
 def heading_alignment_error_deg(
@@ -142,28 +172,9 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
     "heading_alignment_error_deg"}`` with ``None`` for what cannot be computed, and with ``fit_walks``
     ``"landmark_error_fitted_walks_m"``: the landmark error of those walks alone.
     """
-    truth: pd.DataFrame | None = getattr(dataset, "truth_poses", None)
+    truth = _truth_per_pose(dataset, poses_df)
     fixes = getattr(dataset, "fixes", None)
-    if truth is not None and not 0 < len(truth) == len(poses_df):
-        truth = None  # no truth row per pose: landmark errors only
-    wids = poses_df["walk_id"].astype(str).to_numpy()
-    sel = np.ones(len(poses_df), bool) if fit_walks is None else np.isin(wids, [str(w) for w in fit_walks])
-    world_R, world_t = np.eye(2), np.zeros(2)
-    if align:
-        if truth is not None:
-            est = poses_df[["x_m", "y_m"]].to_numpy(float)
-            tru = truth[["x_m", "y_m"]].to_numpy(float)
-            use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
-            world_R, world_t = align_se2(est[use], tru[use])
-        elif fixes is not None and len(fixes) >= 2:
-            fw = fixes["walk_id"].astype(str).to_numpy()
-            est = estimates_at_fixes(poses_df, fw, fixes["t_s"].to_numpy(float))
-            ok = np.isfinite(est).all(axis=1)
-            if fit_walks is not None:
-                named = ok & np.isin(fw, [str(w) for w in fit_walks])
-                ok = named if named.sum() >= 2 else ok
-            if ok.sum() >= 2:
-                world_R, world_t = align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])
+    world_R, world_t = _alignment(poses_df, dataset, fit_walks) if align else (np.eye(2), np.zeros(2))
     out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}
     if truth is not None:
         est = poses_df[["x_m", "y_m"]].to_numpy(float) @ world_R.T + world_t
@@ -176,3 +187,33 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
             out["landmark_error_fitted_walks_m"] = (landmark_error(poses_df, mine, world_R, world_t) if len(mine)
                                                     else None)
     return out
+
+
+def _truth_per_pose(dataset, poses_df: pd.DataFrame) -> pd.DataFrame | None:
+    """The dataset's truth poses when there is one row per pose, else None (landmark errors only)."""
+    truth: pd.DataFrame | None = getattr(dataset, "truth_poses", None)
+    return truth if truth is not None and 0 < len(truth) == len(poses_df) else None
+
+
+def _alignment(poses_df: pd.DataFrame, dataset, fit_walks) -> tuple[np.ndarray, np.ndarray]:
+    """One SE(2) (R, t) onto the truth for all walks, fitted on the walks named in ``fit_walks`` (None:
+    all; all too when fewer than 2 points are named): on the truth poses when there is one per pose,
+    else on the fixes; identity when neither gives 2 points."""
+    truth, fixes = _truth_per_pose(dataset, poses_df), getattr(dataset, "fixes", None)
+    wids = poses_df["walk_id"].astype(str).to_numpy()
+    sel = np.ones(len(poses_df), bool) if fit_walks is None else np.isin(wids, [str(w) for w in fit_walks])
+    if truth is not None:
+        est = poses_df[["x_m", "y_m"]].to_numpy(float)
+        use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
+        return align_se2(est[use], truth[["x_m", "y_m"]].to_numpy(float)[use])
+    if fixes is None or len(fixes) < 2:
+        return np.eye(2), np.zeros(2)
+    fw = fixes["walk_id"].astype(str).to_numpy()
+    est = estimates_at_fixes(poses_df, fw, fixes["t_s"].to_numpy(float))
+    ok = np.isfinite(est).all(axis=1)
+    if fit_walks is not None:
+        named = ok & np.isin(fw, [str(w) for w in fit_walks])
+        ok = named if named.sum() >= 2 else ok
+    if ok.sum() < 2:
+        return np.eye(2), np.zeros(2)
+    return align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])

@@ -14,7 +14,7 @@ import pandas as pd
 
 from rmbuild.config import OptimizeConfig, to_toml
 from rmbuild.errors import InputError
-from rmbuild.evaluate.trajectory import trajectory_metrics
+from rmbuild.evaluate.trajectory import landmark_error_unlinked_at_raw, trajectory_metrics
 from rmbuild.io.workspace import Workspace
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -126,6 +126,9 @@ def _write(ws: Workspace, ds, cfg: OptimizeConfig, result, gauge: str, anchor_ta
     # the optimised walks' alignment is fitted on the linked walks: an unlinked walk's frame is arbitrary
     linked = result.walks.loc[result.walks["linked"].astype(bool), "walk_id"].astype(str).tolist()
     opt = trajectory_metrics(result.poses, ds, align=gauge == "se2", fit_walks=linked or None)
+    if linked:  # whether optimising made the walks worse than raw: null when every walk is linked
+        opt["landmark_error_unlinked_at_raw_m"] = landmark_error_unlinked_at_raw(ds.poses, result.poses, ds, linked,
+                                                                                 align=gauge == "se2")
     stats = dict(result.stats)
     time_s = dict(stats.pop("time_s", {}))
     time_s["metrics"] = time.perf_counter() - t_metrics

@@ -61,6 +61,8 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("optimize", "raw.landmark_error_m.mean", "raw PDR landmark error mean (m)"),
     ("optimize", "optimized.landmark_error_m.mean", "optimised landmark error mean (m)"),
     ("optimize", "optimized.landmark_error_fitted_walks_m.mean", "optimised landmark error mean, linked walks (m)"),
+    ("optimize", "optimized.landmark_error_unlinked_at_raw_m.mean",
+     "optimised landmark error mean, unlinked walks at their raw placement (m)"),
     ("optimize", "time_s.stage_total", "optimise time (s)"),
     ("map", "n_cells", "radio map cells"),
     ("map", "n_aps", "radio map APs"),
