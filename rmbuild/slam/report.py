@@ -89,6 +89,20 @@ def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str
     also = f"; {by_anchor} more placed by anchors alone" if by_anchor else ""
     return (f"{len(unlinked)} of {int(walks.keep.sum())} walk(s) not linked to the reference walk "
             f"{walks.walk_ids[reference]} ({names}): their placement is not constrained by Wi-Fi{also} "
-            "and they are left out of the map (optimize/walks.parquet: linked, anchored, component); to place "
-            "them give known positions (`optimize --anchors FILE`), a floor plan (`ingest --floorplan FILE`, "
-            "optimize.floorplan.use = true) or more walks through the same places")
+            "and they are left out of the map (optimize/walks.parquet: linked, anchored, component)"
+            f"{_groups(table, unlinked)}; "
+            "to place them give known positions (`optimize --anchors FILE`), a floor plan (`ingest --floorplan "
+            "FILE`, optimize.floorplan.use = true) or more walks through the same places")
+
+
+def _groups(table: pd.DataFrame, unlinked: np.ndarray) -> str:
+    """How the unlinked walks hang together: groups placed against each other (their ``component``), which
+    one walk through a group's places and the map's would join, largest first; "" when none has 2 walks."""
+    sizes = table["component"].to_numpy()[unlinked]
+    _, counts = np.unique(sizes, return_counts=True)
+    groups = np.sort(counts[counts >= 2])[::-1]
+    if not len(groups):
+        return ""
+    shown = ", ".join(str(int(n)) for n in groups[:5]) + (", ..." if len(groups) > 5 else "")
+    return (f"; {int(groups.sum())} of them form {len(groups)} group(s) placed against each other ({shown} walks): "
+            "one walk through a group's places and the map's would join the group")

@@ -1,4 +1,5 @@
-"""The predicted placement error per walk (rmbuild.slam.uncertainty) on a hand-built set of straight walks."""
+"""The per-walk report of optimize: the predicted placement error (rmbuild.slam.uncertainty) on a hand-built set
+of straight walks, and the warning that names the unlinked walks."""
 
 from __future__ import annotations
 
@@ -68,3 +69,23 @@ def test_rf_disagreement_raises_the_prediction_and_support_leaves_it():
     pred = predict(llr)
     np.testing.assert_allclose(pred[:2], base[:2], rtol=1e-12)  # not judged / well supported: unchanged
     assert pred[2] == pytest.approx(base[2] * np.exp(5.0 * uncertainty.RF_INFLATION), rel=1e-9)
+
+
+def test_unlinked_warning_names_the_groups_of_unlinked_walks():
+    """Unlinked walks placed against each other are one group each (their component): the warning counts
+    them, largest first, and says nothing of groups when every unlinked walk is alone."""
+    import pandas as pd
+
+    from rmbuild.slam.report import unlinked_warning
+
+    walks = three_walks()
+    walks.walk_ids, walks.keep = ["r", "a", "b", "c", "d", "e"], np.ones(6, bool)
+    table = pd.DataFrame({"linked": [True, False, False, False, False, False], "anchored": False,
+                          "component": [0, 1, 2, 2, 2, 1]})
+    line = unlinked_warning(walks, table, 0)
+    assert line is not None and line.startswith("5 of 6 walk(s) not linked to the reference walk r (a, b, c, d, e)")
+    assert "5 of them form 2 group(s) placed against each other (3, 2 walks)" in line
+    table["component"] = [0, 1, 2, 3, 4, 5]
+    assert "group" not in unlinked_warning(walks, table, 0)
+    table["linked"] = True
+    assert unlinked_warning(walks, table, 0) is None
