@@ -76,6 +76,34 @@ def test_optimize_refuses_a_plan_turned_against_the_compass(venue):
     assert any("not used" in w and "rotated" in w for w in r.stats["warnings"])
 
 
+def test_optimize_refuses_a_plan_where_the_map_fits_two_places(venue):
+    """The venue's plan beside a copy of itself 400 m east: the map fits both halves as well, so its place on
+    the plan is a guess and the plan is not used; the plan alone is used (its best fit leads)."""
+    pytest.importorskip("gtsam")
+    from shapely.ops import unary_union
+
+    from rmbuild.config import IngestConfig
+    from rmbuild.config.optimize import OptimizeConfig
+    from rmbuild.ingest_core import build_dataset
+    from rmbuild.io.formats.base import RawInput
+    from rmbuild.slam import optimize
+
+    sd, plan, _ = venue
+    twin = _moved(plan, shift=(400.0, 0.0))
+    both = FloorPlan(unary_union([plan.walkable, twin.walkable]), unary_union([plan.outline, twin.outline]), [],
+                     None, "twin")
+    raw = RawInput(walks=sd.walks, poses=sd.poses, wifi=sd.wifi, fixes=sd.fixes.iloc[:0])  # no fixes
+    ds, fp, _ = build_dataset(raw, IngestConfig())
+    r = optimize(ds, fp, OptimizeConfig(), floorplan=both)
+    check = r.stats["evidence"]["floorplan"]["frame_check"]
+    assert r.stats["frame"] == "reference walk" and r.stats["evidence"]["floorplan"]["used"] is False
+    assert check["compass_inside"] - check["compass_second"] < 0.02
+    assert any("floor plan twin" in w and "ambiguous" in w and "not used" in w for w in r.stats["warnings"])
+    alone = optimize(ds, fp, OptimizeConfig(), floorplan=plan).stats["evidence"]["floorplan"]
+    assert alone["used"] is True
+    assert alone["frame_check"]["compass_inside"] - alone["frame_check"]["compass_second"] >= 0.08
+
+
 def test_ingest_reports_and_optimize_does_not_use_a_shifted_plan(tmp_path, capsys):
     pytest.importorskip("gtsam")
     from rmbuild.synthetic.venue import plan_geojson

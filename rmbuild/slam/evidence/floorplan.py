@@ -9,7 +9,8 @@
   best fit elsewhere (more than PLAN_DISTINCT_M away) by PLAN_MARGIN of the poses — and it is then
   reported as placed by the plan.
 - Frame check: the plan is not used (the map stays in the reference walk's frame, with a warning) when
-  under PLAN_FRAME_MIN_INSIDE of the reference component's poses fit it, or when they fit it clearly better
+  under PLAN_FRAME_MIN_INSIDE of the reference component's poses fit it, when they fit it almost as well
+  (within PLAN_FRAME_MARGIN of the poses) somewhere more than PLAN_DISTINCT_M away, or when they fit it clearly better
   (PLAN_TURN_GAIN of the poses) turned more than PLAN_TURN_MIN_DEG from the compass's north, searched over
   the full circle: the plan is then rotated (or mirrored) against north. A shifted plan, or another floor's
   with similar corridors, cannot be told apart here (the fit follows the plan): the data's fixes can
@@ -44,6 +45,11 @@ PLAN_DISTINCT_M = 10.0
 # right -> turned 20/90/180 deg, mirrored, another floor's): the right plans keep 78-94 % of the poses
 # inside and gain at most 0.058 turned elsewhere (site2/B1, -55 deg); turned plans gain up to 0.22
 PLAN_FRAME_MIN_INSIDE = 0.5
+# ... and when the reference component's best fit leads the best fit more than PLAN_DISTINCT_M away by less
+# than this share of its poses: its place on the plan is a guess. Measured on the same floors: the fits
+# that put the map within 9 m of the truth led by 0.13 / 0.15 (site1/F1, F2), the ones 82 and 47 m off by
+# 0.02 / 0.04 (site2/F4, F6); site2/B1 0.05 (15 m off, as far as its radio places the walks anyway)
+PLAN_FRAME_MARGIN = 0.08
 PLAN_TURN_GAIN = 0.09
 PLAN_TURN_MIN_DEG = 15.0
 # deg; the turns of the frame check's full-circle search
@@ -120,9 +126,14 @@ class FloorPlanSource(EvidenceSource):
         turn = float((full["turn_deg"] + 180.0) % 360.0 - 180.0)  # from the compass's north
         gain = full["inside"] - compass["inside"]
         self.fit = {"frame_check": {"compass_inside": round(compass["inside"], 3),
+                                    "compass_second": round(compass["second"], 3),
                                     "best_turn_deg": turn, "best_turn_inside": round(full["inside"], 3)}}
         if compass["inside"] < PLAN_FRAME_MIN_INSIDE:
             return f"only {compass['inside']:.0%} of the map's poses fit its walkable space"
+        if compass["inside"] - compass["second"] < PLAN_FRAME_MARGIN:
+            return (f"the map fits it almost as well ({compass['second']:.0%} of the poses inside against "
+                    f"{compass['inside']:.0%}) more than {PLAN_DISTINCT_M:g} m from its best place: where it "
+                    "lies on the plan is ambiguous")
         if gain >= PLAN_TURN_GAIN and abs(turn) >= PLAN_TURN_MIN_DEG:
             return (f"the map fits it better turned {turn:+.0f} deg from the compass's north ({full['inside']:.0%} "
                     f"of the poses inside, {compass['inside']:.0%} unturned): it looks rotated or mirrored")
