@@ -95,7 +95,7 @@ def test_user_plan_in_lonlat_and_metres(tmp_path):
         assert name in str(e.value)
 
 
-def test_ingest_keeps_the_plan_and_optimize_uses_it_when_asked(tmp_path, capsys):
+def test_ingest_keeps_the_plan_and_optimize_uses_it_unless_told_not_to(tmp_path, capsys):
     pytest.importorskip("gtsam")
     from rmbuild.synthetic.venue import plan_geojson
     from tests.cli_util import run_cli
@@ -108,13 +108,19 @@ def test_ingest_keeps_the_plan_and_optimize_uses_it_when_asked(tmp_path, capsys)
     res = run_cli(capsys, "ingest", sim, "-w", ws, "--floorplan", tmp_path / "plan.geojson")
     assert res.code == 0, res.err
     assert (ws / "data" / "floorplan.geojson").is_file() and "floor plan" in res.out
-    cfg = tmp_path / "fp.toml"
-    cfg.write_text("[optimize.floorplan]\nuse = true\n")
-    res = run_cli(capsys, "optimize", "-w", ws, "-q", "--config", cfg)
+    res = run_cli(capsys, "optimize", "-w", ws, "-q")
     assert res.code == 0, res.err
-    assert json.loads((ws / "optimize" / "report.json").read_text())["gauge"] == "floorplan"
-    # asking for a plan the workspace lacks is an input error (exit 2, one line), not a traceback
+    report = json.loads((ws / "optimize" / "report.json").read_text())
+    assert report["gauge"] == "floorplan" and report["evidence"]["floorplan"]["used"] is True
+    off = tmp_path / "off.toml"
+    off.write_text("[optimize.floorplan]\nuse = false\n")
+    res = run_cli(capsys, "optimize", "-w", ws, "-q", "--force", "--config", off)
+    assert res.code == 0, res.err
+    report = json.loads((ws / "optimize" / "report.json").read_text())
+    assert report["gauge"] == "se2" and "floorplan" not in (report.get("evidence") or {})
+    # a workspace without a plan: nothing to use, the map stays in a walk's frame
     bare = tmp_path / "bare"
     assert run_cli(capsys, "ingest", sim, "-w", bare, "-q").code == 0
-    res = run_cli(capsys, "optimize", "-w", bare, "-q", "--config", cfg)
-    assert res.code == 2 and "no floor plan" in res.err and "Traceback" not in res.err
+    res = run_cli(capsys, "optimize", "-w", bare, "-q")
+    assert res.code == 0, res.err
+    assert json.loads((bare / "optimize" / "report.json").read_text())["gauge"] == "se2"

@@ -122,9 +122,7 @@ def test_ingest_reports_and_optimize_does_not_use_a_shifted_plan(tmp_path, capsy
     assert "its frame looks wrong" in res.out
     check = json.loads((ws / "data" / "report.json").read_text())["floorplan"]["frame_check"]
     assert check["wrong_frame"] and check["fixes_inside"] < 0.9 and check["correction"]["fixes_inside"] == 1.0
-    cfg = tmp_path / "fp.toml"
-    cfg.write_text("[optimize.floorplan]\nuse = true\n")
-    res = run_cli(capsys, "optimize", "-w", ws, "-q", "--config", cfg)
+    res = run_cli(capsys, "optimize", "-w", ws, "-q")
     assert res.code == 0, res.err
     report = json.loads((ws / "optimize" / "report.json").read_text())
     assert report["gauge"] == "se2" and report["floorplan_check"]["wrong_frame"]

@@ -18,7 +18,8 @@ FORMAT_HELP = "Input format (default: recognised from the files): " + "; ".join(
 @click.option("--format", "fmt", type=click.Choice(reader_names()), default=None, help=FORMAT_HELP)
 @click.option("--floorplan", "floorplan", type=click.Path(dir_okay=False), default=None,
               help="GeoJSON floor plan (WGS84 lon/lat, or metres with \"frame\": \"local_m\") in the frame of "
-                   "the data's fixes; kept in the workspace for `optimize` (optimize.floorplan.use) and pictures.")
+                   "the data's fixes; kept in the workspace for `optimize` (which uses it unless "
+                   "optimize.floorplan.use = false) and pictures.")
 @click.option("--append", is_flag=True,
               help="Add the walks of INPUTS to the existing workspace (read with its own [ingest]/[pdr] config; "
                    "a walk id already there is an error); later stages' outputs become stale.")

@@ -65,7 +65,7 @@ def _summary(r: dict) -> None:
         click.echo(f"  anisotropic pairs: {vi['anisotropic_pairs']} of {f['vicinity']}, sigma across/along "
                    f"{vi['across_ratio']:.2f} ({how}; optimize/pairs.parquet: anisotropic)")
     plan = (r.get("evidence") or {}).get("floorplan")
-    if plan:
+    if plan and plan.get("used"):
         click.echo(f"  floor plan: {plan['inside']:.0%} of the reference component's poses in walkable space, "
                    f"{plan['wall_priors']} wall priors, {plan['placed_components']} further component(s) placed")
     _errors(r, metrics_text)

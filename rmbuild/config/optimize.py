@@ -110,10 +110,10 @@ class AnchorConfig:
 
 @dataclass(frozen=True)
 class FloorPlanConfig:
-    # build the map in the frame of the workspace's floor plan (`rmbuild ingest --floorplan`, or the plan an
-    # ILC floor brings), with wall priors on poses outside walkable space. Off by default: on the ILC floors
-    # the plan-frame map was 4-7 m less accurate than one SE(2) fitted to truth (docs/optimize.md).
-    use: bool = False
+    # use the workspace's floor plan when it has one (`rmbuild ingest --floorplan`, or the plan an ILC floor
+    # brings): the map in the plan's frame where its place on the plan is distinct, wall priors on poses
+    # outside walkable space; false = ignore the plan (docs/optimize.md, step 14).
+    use: bool = True
 
     def validate(self) -> None:
         pass

@@ -92,7 +92,7 @@ def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str
             "and they are left out of the map (optimize/walks.parquet: linked, anchored, component)"
             f"{_groups(table, unlinked)}; "
             "to place them give known positions (`optimize --anchors FILE`), a floor plan (`ingest --floorplan "
-            "FILE`, optimize.floorplan.use = true) or more walks through the same places")
+            "FILE`) or more walks through the same places")
 
 
 def _groups(table: pd.DataFrame, unlinked: np.ndarray) -> str:

@@ -211,17 +211,14 @@ def _progress_adapter(progress: Progress, viewer: Viewer):
 
 
 def _floor_plan(ws: Workspace, cfg: OptimizeConfig, ds) -> tuple[FloorPlan | None, dict | None]:
-    """The workspace's floor plan when the config asks for it, and the check of its frame against the data's
-    fixes (:func:`rmbuild.io.floorplan.check_plan_frame`); a plan in another frame than the fixes is not
-    used (warned). An error when the config asks for a plan and there is none."""
-    if not cfg.floorplan.use:
+    """The workspace's floor plan (None when it has none or the config says not to use it), and the check of
+    its frame against the data's fixes (:func:`rmbuild.io.floorplan.check_plan_frame`); a plan in another
+    frame than the fixes is not used (warned)."""
+    if not cfg.floorplan.use or not ws.exists("data.floorplan"):
         return None, None
     from rmbuild.floorplan import from_local_geojson  # shapely: imported only when a plan is used
     from rmbuild.io.floorplan import check_plan_frame
 
-    if not ws.exists("data.floorplan"):
-        raise InputError("optimize.floorplan.use = true, but the workspace has no floor plan "
-                         "(`rmbuild ingest --floorplan FILE`)", str(ws.path("data.floorplan")))
     doc = ws.read_json("data.floorplan")
     fixes = ds.fixes[["x_m", "y_m"]].to_numpy(float) if ds.fixes is not None and len(ds.fixes) else np.empty((0, 2))
     check = check_plan_frame(doc, fixes)
