@@ -182,13 +182,14 @@ class OptimizeConfig:
 def paper_config(**overrides) -> OptimizeConfig:
     """Gu et al.'s published model: every walk at the origin, median-window pairs over the readings as heard,
     Ω_IMU = diag(1, 1, 20), d_min 2 m, d_max 30 m, one LM solve over every step, no compass, no scale, no
-    checks."""
+    floor plan, no checks."""
     cfg = OptimizeConfig(
         odometry=OdometryConfig(sigma_x_m=1.0, sigma_y_m=1.0, mu=20.0, estimate_scale=False),
         wifi=WifiConfig(search="median_window", d_min=2.0, d_max=30.0, omega=1.0, across_ratio=1.0,
                         calibrate_devices=False, rss_exponent=1.0),
         compass=CompassConfig(use=False),
         continuity=ContinuityConfig(use=False),
+        floorplan=FloorPlanConfig(use=False),
         placement=PlacementConfig(method="origin"),
         # one node per step, as published (with the paper's weak odometry the composed keyframe factors
         # linearise differently enough to move its folded solutions)

@@ -72,9 +72,8 @@ def optimize(
     placement = place(walks, sources, cfg.placement, _reference_index(walks, cfg))
     if progress:
         progress("init", {"linked": int(placement.linked.sum()), "walks": walks.n_walks})
-    init_xyt = walks.apply_frames(placement.world_T_walk)
-    for s in sources:
-        s.place(walks, placement, init_xyt)
+    for s in sources:  # each source sees the poses as the sources before it left them (a plan, then anchors)
+        s.place(walks, placement, walks.apply_frames(placement.world_T_walk))
     init_xyt = walks.apply_frames(placement.world_T_walk)
     timing["init"] = time.perf_counter() - t0
 
