@@ -208,9 +208,14 @@ def md(res: dict) -> list[str]:
         for loc, r in d.get("localizers", {}).items():
             g = r["evaluates_grid"]
             lines.append(f"| {v} | {loc} | " + " | ".join(
-                f"{s(g[k]['errors'])}; {g[k]['se2_residual_rms_m']:.2f} m; {g[k]['linked_map_walks']} of "
+                f"{s(g[k]['errors'])}; {_fit(g[k]['se2_residual_rms_m'])}; {g[k]['linked_map_walks']} of "
                 f"{g[k]['map_walks']}" for k in ("all", "map")) + " |")
     return lines
+
+
+def _fit(rms: float | None) -> str:
+    """The SE(2)'s residual RMS, or why there is none (a map in the building frame is not fitted)."""
+    return "no fit (building frame)" if rms is None else f"{rms:.2f} m"
 
 
 def main() -> None:
