@@ -52,6 +52,25 @@ def test_append_equals_ingesting_all_at_once(parts: dict[str, Path], capsys: pyt
     assert run_cli(capsys, "export-map", "-w", base / "ws", "-q").code == 0
 
 
+def test_append_keeps_the_floor_plan(parts: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The workspace's floor plan stays through an append (it once vanished, and optimize then lost the
+    building frame), checked again against all the fixes."""
+    import json
+
+    from rmbuild.synthetic.venue import plan_geojson
+
+    venue = json.loads((parts["all"] / "truth" / "venue.json").read_text())
+    (tmp_path / "plan.geojson").write_text(json.dumps({**plan_geojson(venue), "frame": "local_m"}))
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "ingest", parts["old"], "-w", ws, "-q", "--floorplan", tmp_path / "plan.geojson").code == 0
+    before = (ws / "data" / "floorplan.geojson").read_text()
+    r = run_cli(capsys, "ingest", "--append", parts["new"], "-w", ws, "-q")
+    assert r.code == 0, r.err
+    assert (ws / "data" / "floorplan.geojson").read_text() == before
+    report = Workspace.open(ws).read_report("ingest")
+    assert report["floorplan"]["frame_check"]["fixes"] == len(Workspace.open(ws).read_dataset().fixes)
+
+
 def test_append_refuses_known_walks_and_leaves_the_workspace(parts: dict[str, Path], tmp_path: Path,
                                                              capsys: pytest.CaptureFixture) -> None:
     ws = tmp_path / "ws"

@@ -30,6 +30,7 @@ COUNT_KEYS = ("walks", "poses", "readings", "readings_dropped_outside_walk", "sc
 def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
         progress: Progress | None = None) -> dict:
     """Append the walks of ``inputs`` to ``workspace``; returns the new ingest report."""
+    from rmbuild.stages.ingest import plan_summary
     from rmbuild.stages.localize import ingest_configs, read_input, unpinned_origin_warning
 
     if building_floors(workspace) is not None:
@@ -53,8 +54,16 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
         ds = merge(old, new.dataset)
         fp = Fingerprints.from_readings(ds.wifi)
         write_dataset(w, ds, fp)
+        plan = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
+        if plan is not None:  # the floor's plan stays with it, checked again against all the fixes
+            w.json("data.floorplan", plan)
         w.config(ws.read_config_text("ingest") or "")
         report = _report(ws.read_report("ingest") or {}, ds, fp, new.dataset, inputs, new.reader)
+        if plan is not None:
+            said: list[str] = []
+            report["floorplan"] = plan_summary(plan, ds, said)
+            known = report.setdefault("warnings", [])
+            known += [x for x in said if x not in known]
         report["time_s"] = {"total": round(time.perf_counter() - t0, 3)}
         w.report = report
     return report

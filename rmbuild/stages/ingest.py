@@ -128,7 +128,7 @@ def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan:
     ds, fp, summary = build_dataset(raw, cfg, source=fmt, pdr_cfg=pdr_cfg, on_walk=on_walk)
     summary["warnings"].extend(evidence_warnings(ds))
     plan = plan if plan is not None else raw.floorplan
-    summary["floorplan"] = _plan_summary(plan, ds, summary["warnings"])
+    summary["floorplan"] = plan_summary(plan, ds, summary["warnings"])
     return ds, fp, summary, plan
 
 
@@ -178,7 +178,7 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
     return report
 
 
-def _plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:
+def plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:
     """What the report says of the floor plan: its name and the check of its frame against the fixes
     (:func:`rmbuild.io.floorplan.check_plan_frame`), whose warning joins ``warnings``."""
     if plan is None:
