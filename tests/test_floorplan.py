@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from rmbuild.floorplan import from_features
@@ -124,3 +125,49 @@ def test_ingest_keeps_the_plan_and_optimize_uses_it_unless_told_not_to(tmp_path,
     res = run_cli(capsys, "optimize", "-w", bare, "-q")
     assert res.code == 0, res.err
     assert json.loads((bare / "optimize" / "report.json").read_text())["gauge"] == "se2"
+
+
+def test_export_map_writes_the_cells_in_wgs84_when_the_plan_has_lon_lat(tmp_path, capsys):
+    """A plan given in WGS84 puts the map on the globe: export-map writes map/cells.geojson, one lon/lat square
+    per cell whose centre is the cell's centre through the plan's georeference; a map without one does not."""
+    pytest.importorskip("gtsam")
+    from rmbuild.floorplan import Georef
+    from rmbuild.synthetic.venue import plan_geojson
+    from tests.cli_util import run_cli
+
+    sim = tmp_path / "sim"
+    assert run_cli(capsys, "simulate", sim, "--preset", "tiny", "--seed", "1", "-q").code == 0
+    plan = plan_geojson(json.loads((sim / "truth" / "venue.json").read_text()))  # metres from (0, 0)
+    georef = Georef("enu", 11.0, 48.0)
+
+    def on_globe(coords):
+        return [on_globe(c) for c in coords] if isinstance(coords[0], list) else \
+            [round(float(v), 10) for v in georef.to_lonlat(np.array([coords]))[0]]
+
+    for f in plan["features"]:
+        f["geometry"]["coordinates"] = on_globe(f["geometry"]["coordinates"])
+    (tmp_path / "plan.geojson").write_text(json.dumps(plan))
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "ingest", sim, "-w", ws, "-q", "--floorplan", tmp_path / "plan.geojson").code == 0
+    assert run_cli(capsys, "optimize", "-w", ws, "-q").code == 0
+    assert json.loads((ws / "optimize" / "report.json").read_text())["gauge"] == "floorplan"
+    assert run_cli(capsys, "export-map", "-w", ws, "-q").code == 0
+    cells = pd.read_parquet(ws / "map" / "cells.parquet")
+    fc = json.loads((ws / "map" / "cells.geojson").read_text())
+    assert fc["type"] == "FeatureCollection" and len(fc["features"]) == len(cells)
+    ring = np.array(fc["features"][0]["geometry"]["coordinates"][0])
+    assert len(ring) == 5 and (ring[0] == ring[-1]).all()
+    centre = ring[:4].mean(axis=0)
+    props = fc["features"][0]["properties"]
+    expected = georef.to_lonlat(np.array([[props["x_m"], props["y_m"]]]))[0]
+    assert np.abs(centre - expected).max() < 1e-7  # about a centimetre
+    assert props["n_aps"] > 0 and props["strongest_rssi_dbm"] < 0
+    report = json.loads((ws / "map" / "report.json").read_text())
+    assert report["cells_geojson"] == "map/cells.geojson"
+    # the same data without the plan: a walk's frame, no GeoJSON
+    bare = tmp_path / "bare"
+    assert run_cli(capsys, "ingest", sim, "-w", bare, "-q").code == 0
+    assert run_cli(capsys, "optimize", "-w", bare, "-q").code == 0
+    assert run_cli(capsys, "export-map", "-w", bare, "-q").code == 0
+    assert not (bare / "map" / "cells.geojson").exists()
+    assert json.loads((bare / "map" / "report.json").read_text())["cells_geojson"] is None

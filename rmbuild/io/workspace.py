@@ -118,6 +118,7 @@ ARTEFACTS: dict[str, str] = {
     "map.nodes": "map/reference_nodes.parquet",
     "map.wide_csv": "map/radiomap_uji.csv",
     "map.wide_csv_aps": "map/radiomap_uji_aps.csv",
+    "map.cells_geojson": "map/cells.geojson",
     "map.sidecar": "map/radiomap.json",
     "map.histograms": "map/histograms.parquet",
     "map.ble_cells": "map/radiomap_ble.parquet",

@@ -49,6 +49,7 @@ def run(
 def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
          viewer: Viewer) -> dict:
     from rmbuild.radiomap import build_radio_map
+    from rmbuild.stages.map_geojson import cells_feature_collection, map_georef  # shapely, pyproj: when used
 
     t0 = time.perf_counter()
     ds = ws.read_dataset()
@@ -90,6 +91,10 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         side = rm.sidecar()
         side["frame_info"] = info
         w.json("map.sidecar", side)
+        georef = map_georef(ws, rm.frame)
+        if georef is not None:  # on the globe: the cells as WGS84 squares
+            w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef,
+                                                                 plan_doc.get("name", "") if plan_doc else ""))
         w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
         w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
         w.config(to_toml(cfg, "map"))
@@ -103,6 +108,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             "reference_nodes": len(rm.nodes),
             "aps": len(rm.bssids),
             "cell_size_m": cfg.cell_size_m,
+            "cells_geojson": ARTEFACTS["map.cells_geojson"] if georef is not None else None,
             "histograms": None if rm.histograms is None else {
                 "entries": len(rm.histograms), "bin_db": rm.histograms.bin_db,
                 "n_directions": rm.histograms.n_directions,
