@@ -49,7 +49,8 @@ def run(
 def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progress: Progress, force: bool,
          viewer: Viewer) -> dict:
     from rmbuild.radiomap import build_radio_map
-    from rmbuild.stages.map_geojson import cells_feature_collection, map_georef  # shapely, pyproj: when used
+    from rmbuild.stages.localize_geojson import find_georef  # the plan's georeference (shapely, pyproj)
+    from rmbuild.stages.map_geojson import cells_feature_collection
 
     t0 = time.perf_counter()
     ds = ws.read_dataset()
@@ -91,10 +92,9 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         side = rm.sidecar()
         side["frame_info"] = info
         w.json("map.sidecar", side)
-        georef = map_georef(ws, rm.frame)
+        georef, plan_name, _, _ = find_georef(ws, rm.frame)
         if georef is not None:  # on the globe: the cells as WGS84 squares
-            w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef,
-                                                                 plan_doc.get("name", "") if plan_doc else ""))
+            w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef, plan_name))
         w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
         w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
         w.config(to_toml(cfg, "map"))

@@ -25,17 +25,26 @@ WHY = "GeoJSON needs a georeferenced map (write .csv or .parquet instead)"
 
 def map_georef(ws: Workspace, rm: RadioMap) -> tuple[Georef, str]:
     """(georeference, plan name) of the workspace's map; InputError saying why when it has none."""
-    if rm.frame != "building":
-        raise InputError(f"{WHY}: the map is in the frame {rm.frame!r}, not the building's (optimize used "
-                         "neither anchors nor the floor plan)", str(ws.root))
+    georef, name, why, where = find_georef(ws, rm.frame)
+    if georef is None:
+        raise InputError(f"{WHY}: {why}", where)
+    return georef, name
+
+
+def find_georef(ws: Workspace, frame: str) -> tuple[Georef | None, str, str, str]:
+    """(georeference, plan name, "", "") of a map in ``frame`` that can be put on the globe, else (None, "",
+    why not, the path it concerns)."""
+    if frame != "building":
+        return None, "", (f"the map is in the frame {frame!r}, not the building's (optimize used neither "
+                          "anchors nor the floor plan)"), str(ws.root)
     if not ws.exists("data.floorplan"):
-        raise InputError(f"{WHY}: the map is in the building frame but the workspace has no floor plan with "
-                         "lon/lat (`rmbuild ingest --floorplan FILE`)", str(ws.root))
+        return None, "", ("the map is in the building frame but the workspace has no floor plan with lon/lat "
+                          "(`rmbuild ingest --floorplan FILE`)"), str(ws.root)
     plan = from_local_geojson(ws.read_json("data.floorplan"))
     if plan.georef is None:
-        raise InputError(f"{WHY}: the workspace's floor plan is in local metres, without lon/lat",
-                         str(ws.path("data.floorplan")))
-    return plan.georef, plan.name
+        return None, "", "the workspace's floor plan is in local metres, without lon/lat", \
+            str(ws.path("data.floorplan"))
+    return plan.georef, plan.name, "", ""
 
 
 def _num(v) -> float | None:

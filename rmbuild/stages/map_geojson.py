@@ -1,7 +1,7 @@
 """`map/cells.geojson`: the radio map's cells in WGS84 (RFC 7946), when the map can be put on the globe.
 
-A map in the building frame (optimize used anchors or the floor plan) whose workspace holds a
-georeferenced floor plan (`ingest --floorplan` of a WGS84 GeoJSON, or an MS ILC floor's plan) gets one
+A map that :func:`rmbuild.stages.localize_geojson.map_georef` puts on the globe (in the building frame,
+with a floor plan that has lon/lat) gets one
 Polygon feature per cell — the cell's square, corners through :meth:`rmbuild.floorplan.Georef.to_lonlat`,
 counter-clockwise — with properties cell, ix, iy, x_m / y_m (the cell's centre in the map's frame),
 n_scans, n_walks, n_aps (APs heard in it), strongest_bssid / strongest_rssi_dbm (its strongest AP by mean
@@ -13,19 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from rmbuild.floorplan import Georef, from_local_geojson
-from rmbuild.io.workspace import Workspace
+from rmbuild.floorplan import Georef
 
 #: decimal places of the written lon/lat (1e-8 deg: about a millimetre)
 LONLAT_DECIMALS = 8
-
-
-def map_georef(ws: Workspace, frame: str) -> Georef | None:
-    """The georeference of a map in ``frame``: the workspace plan's, for a map in the building frame; None
-    when the map is in a walk's frame or the workspace has no plan with lon/lat."""
-    if frame != "building" or not ws.exists("data.floorplan"):
-        return None
-    return from_local_geojson(ws.read_json("data.floorplan")).georef
 
 
 def cells_feature_collection(cells: pd.DataFrame, long: pd.DataFrame, cell_size_m: float, georef: Georef,
