@@ -159,6 +159,19 @@ def lonlat_to_enu(lon0: float, lat0: float):
     return f
 
 
+def image_extent_m(plan: FloorPlan, extent: tuple[float, float, float, float] | None = None) -> list[float]:
+    """Where a raster image of the plan lies in its local metres, [x0, y0, x1, y1] (left, bottom, right,
+    top): ``extent`` in the plan's own coordinates as the user gave the plan (west, south, east, north in
+    degrees for a plan in WGS84 lon/lat, metres otherwise), or the plan's bounding box when None."""
+    if extent is None:
+        return [float(v) for v in plan.bounds]
+    g = plan.georef
+    if g is None or g.kind != "enu":
+        return [float(v) for v in extent]
+    (x0, y0), (x1, y1) = lonlat_to_enu(g.lon0, g.lat0)(np.array([extent[:2], extent[2:]], float))
+    return [float(x0), float(y0), float(x1), float(y1)]
+
+
 def _enu_pipeline(lon0: float, lat0: float) -> str:
     return (f"+proj=pipeline +step +proj=cart +ellps=WGS84 "
             f"+step +proj=topocentric +ellps=WGS84 +lon_0={lon0} +lat_0={lat0} +h_0=0")

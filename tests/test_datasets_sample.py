@@ -62,6 +62,11 @@ def test_ilc_sample_floor_reads_with_its_plan_files():
     info = json.loads((ILC_FLOOR / "floor_info.json").read_text())["map_info"]
     xy = raw.fixes[["x_m", "y_m"]].to_numpy()
     assert (xy >= 0).all() and (xy[:, 0] <= info["width"]).all() and (xy[:, 1] <= info["height"]).all()
+    # the floor's image spans the same width and height and comes along (drawn under the walks)
+    from rmbuild.io.floor_image import decode
+
+    assert raw.floorplan["image"]["extent_m"] == [0.0, 0.0, info["width"], info["height"]]
+    assert decode(raw.floorplan["image"]["png"]).shape[:2] == (588, 800)  # as shipped
     # each walk's phone PDR has the shape of its waypoint path (published floor: ~1 m, length ratio ~1)
     fits = np.array([pdr_vs_fixes(raw, w) for w in raw.walks["walk_id"]])
     assert np.median(fits[:, 0]) < 1.5

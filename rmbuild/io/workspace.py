@@ -101,6 +101,7 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_landmarks": "data/truth/landmarks.parquet",
     "data.truth_beacons": "data/truth/beacons.parquet",
     "data.floorplan": "data/floorplan.geojson",
+    "data.floor_image": "data/floor_image.png",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
     "optimize.initial_poses": "optimize/initial_poses.parquet",
@@ -235,6 +236,9 @@ class StageWriter:
 
     def text(self, key: str, text: str) -> None:
         self.path(key).write_text(text)
+
+    def binary(self, key: str, data: bytes) -> None:
+        self.path(key).write_bytes(data)
 
     def figure(self, key: str, fig: Any, dpi: int = 110) -> None:
         """Save a matplotlib figure and close it (pyplot keeps open figures alive)."""

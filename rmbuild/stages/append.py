@@ -57,6 +57,8 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
         plan = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
         if plan is not None:  # the floor's plan stays with it, checked again against all the fixes
             w.json("data.floorplan", plan)
+            if ws.exists("data.floor_image"):
+                w.binary("data.floor_image", ws.read_bytes("data.floor_image"))
         w.config(ws.read_config_text("ingest") or "")
         report = _report(ws.read_report("ingest") or {}, ds, fp, new.dataset, inputs, new.reader)
         if plan is not None:

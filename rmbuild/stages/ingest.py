@@ -11,10 +11,12 @@ import numpy as np
 
 from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
+from rmbuild.floorplan import from_local_geojson, image_extent_m
 from rmbuild.ingest_checks import evidence_warnings
 from rmbuild.ingest_core import build_dataset
 from rmbuild.ingest_floors import floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
+from rmbuild.io.floor_image import attach_image, check_extent, read_image, split_image
 from rmbuild.io.floorplan import check_plan_frame, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
 from rmbuild.io.formats.base import RawInput
@@ -39,20 +41,28 @@ def run(
     pdr_cfg: PdrConfig | None = None,
     viewer: Viewer | None = None,
     floorplan: str | Path | None = None,
+    floorplan_image: str | Path | None = None,
+    image_extent: tuple[float, float, float, float] | None = None,
 ) -> dict:
     """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report.
 
     ``pdr_cfg``: options of the raw-IMU formats (phone PDR, ILC/IPIN specifics); defaults when None.
     ``floorplan``: a GeoJSON floor plan (:func:`rmbuild.io.floorplan.read_user_plan`) in the frame of the
-    data's fixes; it replaces a plan the input format carries.
+    data's fixes; it replaces a plan the input format carries. ``floorplan_image``: a raster image of the
+    plan for display, over ``image_extent`` (:func:`rmbuild.floorplan.image_extent_m`; the plan's bounding
+    box when None); it replaces an image the input format carries.
     """
     plan = read_user_plan(floorplan) if floorplan is not None else None
+    image = None
+    if floorplan_image is not None:
+        extent = None if image_extent is None else check_extent(image_extent, "--floorplan-image-extent")
+        image = (read_image(floorplan_image), extent)
     files = _input_files(inputs, workspace)
     Path(workspace).resolve().parent.mkdir(parents=True, exist_ok=True)  # the lock lives beside the workspace
     with workspace_lock(workspace, "ingest"):
         check_replaceable(Path(workspace), force)
         return _run(inputs, files, workspace, cfg, fmt, force, ensure_progress(progress), pdr_cfg or PdrConfig(),
-                    ensure_viewer(viewer), plan)
+                    ensure_viewer(viewer), plan, image)
 
 
 def _input_files(inputs: list[str | Path], workspace: str | Path) -> list[Path]:
@@ -71,7 +81,8 @@ def _input_files(inputs: list[str | Path], workspace: str | Path) -> list[Path]:
 
 
 def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg: IngestConfig, fmt: str | None,
-         force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None) -> dict:
+         force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None,
+         image: tuple[bytes, list[float] | None] | None) -> dict:
     t0 = time.perf_counter()
     reader = choose_reader(files, fmt, pdr_cfg)
     progress.phase(f"reading {reader.name}", len(files), "files")
@@ -88,6 +99,9 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     pdr_cfg = pinned_origin(pdr_cfg, raw)
     floors = split_floors(raw)
     if floors is not None:
+        if image is not None:
+            raise InputError(f"--floorplan-image gives one image, but the input holds {len(floors)} floors "
+                             f"({', '.join(floors)}); ingest them one floor at a time to give images")
         return _run_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, plan, raw,
                              floors, t0, t_read)
     if raw.imu:  # the count is the PDR's; validating and attaching follow it in the same phase
@@ -95,7 +109,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     else:
         progress.phase("validating and attaching readings")
     t1 = time.perf_counter()
-    ds, fp, summary, plan = _build(raw, cfg, reader.name, pdr_cfg, plan, on_walk=lambda w: progress.advance())
+    ds, fp, summary, plan = _build(raw, cfg, reader.name, pdr_cfg, plan, image, on_walk=lambda w: progress.advance())
     progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
@@ -122,21 +136,37 @@ def pinned_origin(pdr_cfg: PdrConfig, raw: RawInput) -> PdrConfig:
 
 
 def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan: dict | None,
-           on_walk=None) -> tuple[Dataset, Fingerprints, dict, dict | None]:
-    """Validate and attach one floor's input: (dataset, fingerprints, summary, the floor plan kept);
-    ``on_walk(walk_id)`` after each walk's PDR."""
+           image: tuple[bytes, list[float] | None] | None = None, on_walk=None
+           ) -> tuple[Dataset, Fingerprints, dict, dict | None]:
+    """Validate and attach one floor's input: (dataset, fingerprints, summary, the floor plan kept, with the
+    user's ``image`` (PNG, extent) when given); ``on_walk(walk_id)`` after each walk's PDR."""
+    plan = plan if plan is not None else raw.floorplan
+    if image is not None:
+        plan = _with_image(plan, *image)
     ds, fp, summary = build_dataset(raw, cfg, source=fmt, pdr_cfg=pdr_cfg, on_walk=on_walk)
     summary["warnings"].extend(evidence_warnings(ds))
-    plan = plan if plan is not None else raw.floorplan
     summary["floorplan"] = plan_summary(plan, ds, summary["warnings"])
     return ds, fp, summary, plan
+
+
+def _with_image(plan: dict | None, png: bytes, extent: list[float] | None) -> dict:
+    """``plan`` carrying the user's image ``png`` over ``extent`` (in the plan's own coordinates; None: its
+    bounding box); InputError without a plan."""
+    if plan is None:
+        raise InputError("--floorplan-image needs a floor plan: give --floorplan, or an input that comes with "
+                         "one (an MS ILC floor folder)")
+    tup = None if extent is None else (extent[0], extent[1], extent[2], extent[3])
+    return attach_image(plan, png, image_extent_m(from_local_geojson(plan), tup))
 
 
 def _write(w: StageWriter, ds: Dataset, fp: Fingerprints, plan: dict | None, cfg: IngestConfig,
            pdr_cfg: PdrConfig, uses_pdr: bool) -> None:
     write_dataset(w, ds, fp)
     if plan is not None:
+        plan, png = split_image(plan)
         w.json("data.floorplan", plan)
+        if png is not None:
+            w.binary("data.floor_image", png)
     w.config(to_toml(cfg, "ingest") + ("\n" + to_toml(pdr_cfg, "pdr") if uses_pdr else ""))
 
 
@@ -179,13 +209,14 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
 
 
 def plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:
-    """What the report says of the floor plan: its name and the check of its frame against the fixes
-    (:func:`rmbuild.io.floorplan.check_plan_frame`), whose warning joins ``warnings``."""
+    """What the report says of the floor plan: its name, its image's extent (m) and the check of its frame
+    against the fixes (:func:`rmbuild.io.floorplan.check_plan_frame`), whose warning joins ``warnings``."""
     if plan is None:
         return None
     fixes = ds.fixes[["x_m", "y_m"]].to_numpy(float) if ds.fixes is not None and len(ds.fixes) else np.empty((0, 2))
     check = check_plan_frame(plan, fixes)
     if check is not None and check.get("warning"):
         warnings.append(check["warning"])
-    return {"name": plan.get("name", ""), "fixes_inside": None if check is None else check["fixes_inside"],
+    return {"name": plan.get("name", ""), "image_extent_m": (plan.get("image") or {}).get("extent_m"),
+            "fixes_inside": None if check is None else check["fixes_inside"],
             "frame_check": check}

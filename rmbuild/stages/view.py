@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rmbuild.io.floor_image import load_image
 from rmbuild.io.workspace import STAGE_COMMANDS, Workspace, walk_file_names
 from rmbuild.stages.building import floor_workspaces, no_viewer_for_building, run_floors
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -55,6 +56,8 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
     viewer.set_walks(ds.walk_ids())
     walls = plan_segments(ds.venue, ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None)
     viewer.log_venue(None if walls is None else {"walls": walls.tolist()})
+    if (image := load_image(ws)) is not None:
+        viewer.log_plan_image(*image)
     viewer.log_raw_walks(ds.poses)
     logged.append("raw walks")
     if ds.truth_poses is not None and len(ds.truth_poses):

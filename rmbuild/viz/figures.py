@@ -252,16 +252,22 @@ def cdf_figure(errors: Mapping[str, np.ndarray], title: str = "localization erro
 # ------------------------------------------------------------------ walks and the optimiser
 def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequence[str],
                  truth: pd.DataFrame | None = None, walls: np.ndarray | None = None,
-                 fixes: Sequence[pd.DataFrame | None] | None = None) -> Any:
-    """One panel per (title, poses) — poses with walk_id, x_m, y_m — over the floor plan (walls (n, 4) m)
-    and the true paths (thin dashed grey) when known; one colour per walk. ``fixes``: per panel, the
-    waypoints / position fixes (walk_id, x_m, y_m) in that panel's frame, or None when they cannot be
-    placed there; drawn as crosses in the walk's colour."""
+                 fixes: Sequence[pd.DataFrame | None] | None = None,
+                 image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
+    """One panel per (title, poses) — poses with walk_id, x_m, y_m — over the floor plan (walls (n, 4) m;
+    ``image``: its raster (pixels, extent x0, y0, x1, y1 m), faded) and the true paths (thin dashed grey)
+    when known; one colour per walk. ``fixes``: per panel, the waypoints / position fixes (walk_id, x_m,
+    y_m) in that panel's frame, or None when they cannot be placed there; drawn as crosses in the walk's
+    colour."""
     order = {str(w): i for i, w in enumerate(walk_order)}
     fig = _figure(6.2 * len(panels), 5.6 + (0.5 if len(walk_order) <= 12 else 0))
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     any_fix = False
     for k, (ax, (title, poses)) in enumerate(zip(axes, panels)):
+        if image is not None:
+            x0, y0, x1, y1 = image[1]
+            ax.imshow(image[0], extent=(x0, x1, y0, y1), origin="upper", alpha=0.45, zorder=0,
+                      interpolation="bilinear")
         _walls(ax, walls, color="0.45")
         if truth is not None:
             for _, g in truth.groupby("walk_id", sort=False):

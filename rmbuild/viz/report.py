@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild import __version__
+from rmbuild.io.floor_image import load_image
 from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz import figures
@@ -280,14 +281,16 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
     drawn_walls = walls if all_building else None
+    image = load_image(ws) if all_building else None
     fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls,
-                               fixes=panel_fixes)
+                               fixes=panel_fixes, image=image)
     caption = "Coloured: one colour per walk"  # and only what is drawn
     caption += "; dashed grey: ground truth" if ds.truth_poses is not None else " (no true paths to draw)"
     n_fix = max((len(f) for f in panel_fixes if f is not None), default=0)
     if n_fix:
         caption += f"; crosses: waypoints / position fixes ({n_fix}), in their walk's colour"
-    caption += "; dark lines: floor plan." if drawn_walls is not None else "."
+    caption += "; dark lines: floor plan" if drawn_walls is not None else ""
+    caption += "; underneath: the plan's image." if image is not None else "."
     if unplaced:
         caption += (f" After: {unplaced} walk(s) not linked to the map are not drawn (their frame is arbitrary;"
                     " optimize/walks.parquet names them).")

@@ -7,6 +7,7 @@ API moves between releases: rmbuild pins rerun-sdk to one minor (:data:`RERUN_VE
 Entity tree (``floor`` and ``raw`` carry a static y-flip so that +y points up in the 2D views)::
 
     floor/plan/walls                      venue walls (static)
+    floor/plan/image                      the plan's raster image, when the workspace has one (static)
     floor/truth/<walk>                    true path (static) + .../pos: the current step (timeline "step")
     floor/optimized/<walk>, .../pos       optimised path in the common frame
     floor/initial/<walk>                  initial guess of the optimiser
@@ -365,6 +366,18 @@ class RerunViewer:
         self.rec.log(f"{FLOOR}/plan/walls", self.rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=[0.1]),
                      static=True)
         self._count("walls", len(strips))
+
+    def log_plan_image(self, pixels: np.ndarray, extent_m: Sequence[float]) -> None:
+        """The floor plan's raster image (rows, cols, 3 or 4 uint8; row 0 the top) over ``extent_m`` (x0, y0,
+        x1, y1 m) -> ``floor/plan/image``, under everything else."""
+        x0, y0, x1, y1 = (float(v) for v in extent_m)
+        rows, cols = pixels.shape[:2]
+        path = f"{FLOOR}/plan/image"
+        self.rec.log(path, self.rr.Transform3D(translation=[x0, y1, 0.0],
+                                               scale=[(x1 - x0) / cols, -(y1 - y0) / rows, 1.0]), static=True)
+        model = "RGBA" if pixels.shape[2] == 4 else "RGB"
+        self.rec.log(path, self.rr.Image(pixels, color_model=model, opacity=0.5, draw_order=-10.0), static=True)
+        self._count("plan_image")
 
     def log_fixes(self, fixes: pd.DataFrame) -> None:
         """Waypoints / position fixes (walk_id, x_m, y_m, optional label), building frame: crosses in the

@@ -71,6 +71,8 @@ class Viewer(Protocol):
 
     def log_venue(self, venue: dict | None) -> None: ...
 
+    def log_plan_image(self, pixels: np.ndarray, extent_m: Sequence[float]) -> None: ...
+
     def log_fixes(self, fixes: pd.DataFrame) -> None: ...
 
     def log_alignment(self, theta_rad: float, translation_xy: Sequence[float] | np.ndarray,
@@ -133,6 +135,9 @@ class NullViewer:
         pass
 
     def log_venue(self, venue: dict | None) -> None:
+        pass
+
+    def log_plan_image(self, pixels: np.ndarray, extent_m: Sequence[float]) -> None:
         pass
 
     def log_fixes(self, fixes: pd.DataFrame) -> None:

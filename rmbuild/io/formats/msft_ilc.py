@@ -25,6 +25,7 @@ import pandas as pd
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
+from rmbuild.io.floor_image import attach_image, read_image
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.pdr import ImuSignals, accuracy_flags, rotation_vector_quat, yaw_from_quat
 
@@ -418,23 +419,27 @@ def _beacons(b: _Rows, wid: str, path: Path) -> tuple[pd.DataFrame, np.ndarray, 
 
 def _floor_plans(files: list[Path]) -> dict[str, dict]:
     """Each floor folder's plan (``geojson_map.json`` scaled by ``floor_info.json``'s width and height, the
-    frame of the waypoints) as local-metre GeoJSON, by folder name, when both files are among the inputs."""
+    frame of the waypoints) as local-metre GeoJSON, by folder name, when both files are among the inputs;
+    with ``floor_image.png``, which spans that width and height, when it is there too."""
     from rmbuild.floorplan import from_ilc, to_geojson
 
     folders: dict[Path, dict[str, Path]] = {}
     for f in files:
-        if f.name in ("geojson_map.json", "floor_info.json"):
+        if f.name in COMPANION_FILES:
             folders.setdefault(f.parent, {})[f.name] = f
     out: dict[str, dict] = {}
     for folder, byname in folders.items():
-        if len(byname) < 2:
+        if not {"geojson_map.json", "floor_info.json"} <= set(byname):
             continue
         try:
             info = json.loads(byname["floor_info.json"].read_text())["map_info"]
             doc = json.loads(byname["geojson_map.json"].read_text())
-            out[folder.name] = to_geojson(from_ilc(doc, float(info["width"]), float(info["height"]), folder.name))
+            w, h = float(info["width"]), float(info["height"])
+            out[folder.name] = to_geojson(from_ilc(doc, w, h, folder.name))
         except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
             raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
+        if "floor_image.png" in byname:
+            out[folder.name] = attach_image(out[folder.name], read_image(byname["floor_image.png"]), [0.0, 0.0, w, h])
     return out
 
 
@@ -464,8 +469,12 @@ class MsftIlcReader(Reader):
         plans = _floor_plans(files)
         plan = next(iter(plans.values())) if len(plans) == 1 else None
         for p in plans.values():
-            notes.append(f"floor plan: {p['name'] or 'geojson_map.json'} with its extent from floor_info.json")
-        used = {"geojson_map.json", "floor_info.json"} if plans else set()
+            notes.append(f"floor plan: {p['name'] or 'geojson_map.json'} with its extent from floor_info.json"
+                         + (" and its image floor_image.png" if "image" in p else ""))
+        used = set()
+        if plans:
+            used = {"geojson_map.json", "floor_info.json", *(["floor_image.png"] if any(
+                "image" in p for p in plans.values()) else [])}
         unused = sorted({f.name for f in files if f.name in COMPANION_FILES} - used)
         if unused:
             notes.append(f"companion files not used: {', '.join(unused)}")
