@@ -46,14 +46,25 @@ class Georef:
 
         xy = np.asarray(xy, float).reshape(-1, 2)
         if self.kind == "ilc":
-            x0, y0, x1, y1 = _mercator_bbox(self.bbox)
-            mx = x0 + xy[:, 0] / self.size_m[0] * (x1 - x0)
-            my = y0 + xy[:, 1] / self.size_m[1] * (y1 - y0)
+            mx, my = self.to_web_mercator(xy).T
             lon, lat = Transformer.from_crs("EPSG:3857", "EPSG:4326", always_xy=True).transform(mx, my)
             return np.c_[lon, lat]
         t = Transformer.from_pipeline(_enu_pipeline(self.lon0, self.lat0))
         lon, lat, _ = t.transform(xy[:, 0], xy[:, 1], np.zeros(len(xy)), direction="INVERSE")
         return np.c_[lon, lat]
+
+    def to_web_mercator(self, xy: np.ndarray) -> np.ndarray:
+        """(n, 2) Web Mercator (EPSG:3857) x, y [m] of local points (n, 2) [m]: the projected metres
+        UJIIndoorLoc gives as LONGITUDE, LATITUDE."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if self.kind == "ilc":
+            x0, y0, x1, y1 = _mercator_bbox(self.bbox)
+            return np.c_[x0 + xy[:, 0] / self.size_m[0] * (x1 - x0), y0 + xy[:, 1] / self.size_m[1] * (y1 - y0)]
+        from pyproj import Transformer
+
+        lonlat = self.to_lonlat(xy)
+        mx, my = Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True).transform(lonlat[:, 0], lonlat[:, 1])
+        return np.c_[mx, my]
 
 
 @dataclass

@@ -163,7 +163,15 @@ def test_export_map_writes_the_cells_in_wgs84_when_the_plan_has_lon_lat(tmp_path
     assert np.abs(centre - expected).max() < 1e-7  # about a centimetre
     assert props["n_aps"] > 0 and props["strongest_rssi_dbm"] < 0
     report = json.loads((ws / "map" / "report.json").read_text())
-    assert report["cells_geojson"] == "map/cells.geojson"
+    assert report["cells_geojson"] == "map/cells.geojson" and report["uji_coordinates"] == "EPSG:3857"
+    # the UJI-layout CSV: LONGITUDE, LATITUDE in Web Mercator metres, as UJIIndoorLoc's
+    from pyproj import Transformer
+
+    uji = pd.read_csv(ws / "map" / "radiomap_uji.csv")
+    table = pd.read_parquet(ws / "map" / "cells.parquet")
+    lonlat = georef.to_lonlat(table[["x_m", "y_m"]].to_numpy())
+    mx, my = Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True).transform(lonlat[:, 0], lonlat[:, 1])
+    assert np.abs(uji["LONGITUDE"] - mx).max() < 0.01 and np.abs(uji["LATITUDE"] - my).max() < 0.01
     # the same data without the plan: a walk's frame, no GeoJSON
     bare = tmp_path / "bare"
     assert run_cli(capsys, "ingest", sim, "-w", bare, "-q").code == 0
@@ -171,3 +179,6 @@ def test_export_map_writes_the_cells_in_wgs84_when_the_plan_has_lon_lat(tmp_path
     assert run_cli(capsys, "export-map", "-w", bare, "-q").code == 0
     assert not (bare / "map" / "cells.geojson").exists()
     assert json.loads((bare / "map" / "report.json").read_text())["cells_geojson"] is None
+    uji = pd.read_csv(bare / "map" / "radiomap_uji.csv")
+    table = pd.read_parquet(bare / "map" / "cells.parquet")
+    assert (uji["LONGITUDE"] == table["x_m"]).all() and (uji["LATITUDE"] == table["y_m"]).all()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -22,6 +23,9 @@ from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz.align import plan_segments
 from rmbuild.viz.figures import coverage_figure, heatmaps_figure
 from rmbuild.viz.viewer import Viewer, ensure_viewer
+
+if TYPE_CHECKING:
+    from rmbuild.floorplan import Georef  # shapely, pyproj: imported when a map is put on the globe
 
 
 def run(
@@ -79,26 +83,25 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     progress.phase("writing map")
     node_pos = pd.DataFrame({"node": rm.nodes.node, "walk": rm.node_walk, "x_m": rm.node_xy[:, 0],
                              "y_m": rm.node_xy[:, 1]})
+    georef, plan_name, _, _ = find_georef(ws, rm.frame)
+    floor = level_of_floor(ws.root) or 0
     with ws.writing("map") as w:
         long = rm.long_table()
         w.table("map.cells", long)
         w.table("map.cell_table", rm.cells[list(CELL_COLUMNS)])
         w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
-        rm.wide_table("uji", floor=level_of_floor(ws.root) or 0).to_csv(w.path("map.wide_csv"), index=False)
-        pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
-            w.path("map.wide_csv_aps"), index=False)  # WAPnnn -> BSSID, for tools that read the CSV alone
+        _write_uji(w, rm, floor, georef, "map.wide_csv", "map.wide_csv_aps")
         if rm.histograms is not None:
             w.table("map.histograms", rm.histograms.long_table(rm.bssids, rm.cells))
         side = rm.sidecar()
-        side["frame_info"] = info
+        side.update(frame_info=info, uji_coordinates=_uji_coordinates(georef))
         w.json("map.sidecar", side)
-        georef, plan_name, _, _ = find_georef(ws, rm.frame)
         if georef is not None:  # on the globe: the cells as WGS84 squares
             w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef, plan_name))
         w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
         w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
         w.config(to_toml(cfg, "map"))
-        ble_report = _write_ble(w, ble_rm, info, level_of_floor(ws.root) or 0) if ble_rm is not None else ble_skipped
+        ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
         report = {
             "stage": "export-map",
             "frame": info["frame"],
@@ -109,6 +112,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             "aps": len(rm.bssids),
             "cell_size_m": cfg.cell_size_m,
             "cells_geojson": ARTEFACTS["map.cells_geojson"] if georef is not None else None,
+            "uji_coordinates": _uji_coordinates(georef),
             "histograms": None if rm.histograms is None else {
                 "entries": len(rm.histograms), "bin_db": rm.histograms.bin_db,
                 "n_directions": rm.histograms.n_directions,
@@ -137,17 +141,28 @@ def _ble_map(ble: pd.DataFrame | None, xy: np.ndarray, walk_of_node: np.ndarray,
         return None, {"skipped": str(e).replace("Wi-Fi", "BLE")}
 
 
-def _write_ble(w: StageWriter, rm: RadioMap, info: dict, floor: int) -> dict:
+def _uji_coordinates(georef: Georef | None) -> str:
+    """What the UJI-layout CSVs' LONGITUDE and LATITUDE hold."""
+    return "EPSG:3857" if georef is not None else "map_frame_m"
+
+
+def _write_uji(w: StageWriter, rm: RadioMap, floor: int, georef: Georef | None, csv_key: str, aps_key: str) -> None:
+    """The map in UJIIndoorLoc's wide layout and its WAPnnn -> BSSID table (for tools that read the CSV
+    alone); LONGITUDE, LATITUDE in Web Mercator metres as UJIIndoorLoc's when the map is on the globe."""
+    xy = None if georef is None else georef.to_web_mercator(rm.cells[["x_m", "y_m"]].to_numpy(float))
+    rm.wide_table("uji", floor=floor, lon_lat=xy).to_csv(w.path(csv_key), index=False)
+    pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(w.path(aps_key),
+                                                                                          index=False)
+
+
+def _write_ble(w: StageWriter, rm: RadioMap, info: dict, floor: int, georef: Georef | None) -> dict:
     """Write the BLE map's files (the Wi-Fi map's tables, CSV and sidecar under ``map.ble_*`` names);
     returns its part of the report."""
     w.table("map.ble_cells", rm.long_table())
     w.table("map.ble_cell_table", rm.cells[list(CELL_COLUMNS)])
-    rm.wide_table("uji", floor=floor).to_csv(w.path("map.ble_wide_csv"), index=False)
-    pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(
-        w.path("map.ble_wide_csv_aps"), index=False)
+    _write_uji(w, rm, floor, georef, "map.ble_wide_csv", "map.ble_wide_csv_aps")
     side = rm.sidecar()
-    side["frame_info"] = info
-    side["modality"] = "ble"
+    side.update(frame_info=info, modality="ble", uji_coordinates=_uji_coordinates(georef))
     w.json("map.ble_sidecar", side)
     keys = ("map.ble_cells", "map.ble_cell_table", "map.ble_wide_csv", "map.ble_wide_csv_aps", "map.ble_sidecar")
     return {"cells": int(rm.n_cells), "beacons": len(rm.bssids), "reference_nodes": len(rm.nodes),
