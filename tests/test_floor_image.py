@@ -62,6 +62,37 @@ def test_the_image_is_kept_with_the_plan_over_its_extent(sim, tmp_path, capsys):
     assert Workspace.open(ws2).read_report("ingest")["floorplan"]["image_extent_m"] == [-5.0, -4.0, 75.5, 36.0]
 
 
+def test_a_plan_file_names_its_own_image(sim, tmp_path, capsys):
+    """A plan's "image" member (file relative to the plan, optional extent) comes along with --floorplan, and
+    with `rmbuild build` (whose input fingerprint covers the image); --floorplan-image replaces it; a malformed
+    member is a one-line error naming the plan."""
+    from rmbuild.io.floor_image import load_image
+    from rmbuild.io.workspace import Workspace
+    from rmbuild.stages.build import _plan_files
+
+    data, plan = sim
+    doc = json.loads(plan.read_text())
+    (tmp_path / "img").mkdir()
+    _png(tmp_path / "img" / "floor.png", 60, 30)
+    own = tmp_path / "own.geojson"
+    own.write_text(json.dumps({**doc, "image": {"file": "img/floor.png", "extent": [-1, -2, 59, 28]}}))
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "ingest", data, "-w", ws, "-q", "--floorplan", own).code == 0
+    pixels, extent = load_image(Workspace.open(ws))
+    assert extent == [-1.0, -2.0, 59.0, 28.0] and pixels.shape == (30, 60, 3)
+    assert _plan_files(own) == [own, tmp_path / "img" / "floor.png"] and _plan_files(plan) == [plan]
+    r = run_cli(capsys, "ingest", data, "-w", ws, "-q", "--force", "--floorplan", own, "--floorplan-image",
+                _png(tmp_path / "other.png", 20, 10))
+    assert r.code == 0, r.err
+    assert load_image(Workspace.open(ws))[0].shape == (10, 20, 3)
+    for member, said in (({"file": "img/none.png"}, "none.png"), ({"path": "img/floor.png"}, '"image" must be'),
+                         ({"file": "img/floor.png", "extent": [0, 0, 1]}, "x0 < x1")):
+        bad = tmp_path / "bad.geojson"
+        bad.write_text(json.dumps({**doc, "image": member}))
+        r = run_cli(capsys, "ingest", data, "-w", tmp_path / "ws_bad", "--floorplan", bad)
+        assert r.code == 2 and said in r.err and len(r.err.strip().splitlines()) == 1, r.err
+
+
 def test_an_extent_in_lon_lat_for_a_plan_in_wgs84():
     """A WGS84 plan's image extent is given in degrees (west, south, east, north) and lands in the plan's
     metres: the south-west corner of the plan is (0, 0)."""

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from rmbuild.errors import InputError
-from rmbuild.floorplan import frame_correction, from_local_geojson, from_user_geojson, to_geojson
+from rmbuild.floorplan import frame_correction, from_local_geojson, from_user_geojson, image_extent_m, to_geojson
+from rmbuild.io.floor_image import attach_image, check_extent, read_image
 
 #: bytes; a larger plan file is refused (a detailed mall floor is a few MB)
 MAX_PLAN_BYTES = 64 * 1024 * 1024
@@ -25,19 +26,60 @@ MIN_FIXES_INSIDE = 0.9
 
 def read_user_plan(path: str | Path) -> dict:
     """The plan at ``path`` (GeoJSON in WGS84 lon/lat, or local metres with ``"frame": "local_m"``) as
-    workspace GeoJSON; InputError naming the file otherwise."""
+    workspace GeoJSON, with the raster image its ``"image"`` member names (:func:`plan_image`); InputError
+    naming the file otherwise."""
     p = Path(path)
     try:
-        if p.stat().st_size > MAX_PLAN_BYTES:
-            raise InputError(f"floor plan larger than {MAX_PLAN_BYTES // 2**20} MB", str(p))
-        doc = json.loads(p.read_bytes())
-        return {**to_geojson(from_user_geojson(doc, p.stem)), "source": str(p)}
+        doc = _read_doc(p)
+        plan = from_user_geojson(doc, p.stem)
+        out = {**to_geojson(plan), "source": str(p)}
+        image = plan_image(doc, p)
+        if image is None:
+            return out
+        return attach_image(out, read_image(image[0]), image_extent_m(plan, image[1]))
     except InputError:
         raise
     except OSError as e:
         raise InputError(f"cannot read floor plan: {e.strerror or e}", str(p)) from None
     except (ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
         raise InputError(f"not a usable GeoJSON floor plan: {str(e)[:200]}", str(p)) from None
+
+
+def _read_doc(p: Path) -> dict:
+    if p.stat().st_size > MAX_PLAN_BYTES:
+        raise InputError(f"floor plan larger than {MAX_PLAN_BYTES // 2**20} MB", str(p))
+    return json.loads(p.read_bytes())
+
+
+def plan_image(doc: dict, path: Path) -> tuple[Path, tuple[float, float, float, float] | None] | None:
+    """The raster image a user's plan names in its ``"image"`` member, ``{"file": PATH (relative to the
+    plan's folder), "extent": [x0, y0, x1, y1] (optional; the plan's coordinates, as
+    :func:`rmbuild.floorplan.image_extent_m` takes them)}``: (its path, the extent or None); None without
+    the member; InputError naming the plan file when the member is malformed."""
+    img = doc.get("image") if isinstance(doc, dict) else None
+    if img is None:
+        return None
+    if not isinstance(img, dict) or not isinstance(img.get("file"), str) or not img["file"] \
+            or set(img) - {"file", "extent"}:
+        raise InputError('"image" must be {"file": "PATH", "extent": [x0, y0, x1, y1]} (extent optional)', str(path))
+    extent = img.get("extent")
+    if extent is not None:
+        if not isinstance(extent, list) or not all(isinstance(v, (int, float)) for v in extent):
+            raise InputError('"image" "extent" must be four numbers [x0, y0, x1, y1]', str(path))
+        e = check_extent(extent, str(path))
+        extent = (e[0], e[1], e[2], e[3])
+    f = Path(img["file"])
+    return (f if f.is_absolute() else path.parent / f), extent
+
+
+def plan_image_file(path: str | Path) -> Path | None:
+    """The image file a user's plan at ``path`` names, None without one or when the plan is unreadable (the
+    reading proper reports that)."""
+    try:
+        image = plan_image(_read_doc(Path(path)), Path(path))
+    except (OSError, ValueError, InputError):
+        return None
+    return None if image is None else image[0]
 
 
 def check_plan_frame(doc: dict, fixes_xy: np.ndarray) -> dict | None:

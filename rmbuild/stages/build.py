@@ -21,6 +21,7 @@ from rmbuild.config import load_stage_config, to_toml
 from rmbuild.config.build import parse_scheduler
 from rmbuild.errors import RmbuildError, one_line
 from rmbuild.io.atomic import write_json_atomic
+from rmbuild.io.floorplan import plan_image_file
 from rmbuild.io.lock import workspace_lock
 from rmbuild.io.venues import Venue
 from rmbuild.io.workspace import (
@@ -75,11 +76,10 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
     with ExitStack() as stack:
         stack.enter_context(workspace_lock(workspace, "build"))
         state = None if force else _previous_state(workspace)
-        # the floor plan's content is fingerprinted as the last input
+        # the floor plan's content (and its image's) is fingerprinted after the inputs
         settings = {"ingest": to_toml(cfgs["ingest"], "ingest"), "pdr": to_toml(cfgs["pdr"], "pdr"), "format": fmt,
                     "floorplan": floorplan is not None}
-        fp = input_fingerprint([*inputs, *([floorplan] if floorplan else [])], settings,
-                               (state or {}).get("inputs"))
+        fp = input_fingerprint([*inputs, *_plan_files(floorplan)], settings, (state or {}).get("inputs"))
         ingest_now = state is None or not same_inputs(state.get("inputs"), fp)
         runner = None
         if sched.kind == "address" or (sched.kind == "local" and ingest_now):
@@ -100,6 +100,14 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
     if out["building"]:
         write_json_atomic(building_report_path(workspace, "build"), out)
     return out
+
+
+def _plan_files(floorplan: str | Path | None) -> list[Path]:
+    """The plan file and the image it names (both part of what is ingested)."""
+    if floorplan is None:
+        return []
+    image = plan_image_file(floorplan)
+    return [Path(floorplan), *([image] if image is not None and image.is_file() else [])]
 
 
 def _previous_state(workspace: str | Path) -> dict | None:
