@@ -33,7 +33,8 @@ def _extent(ctx, param, value: str | None) -> tuple[float, float, float, float] 
                    "optimize.floorplan.use = false) and pictures.")
 @click.option("--floorplan-image", "floorplan_image", type=click.Path(dir_okay=False), default=None,
               help="Raster image of the floor plan (PNG, JPEG, ...), drawn under the walks in the report and the "
-                   "viewer; replaces the image an MS ILC floor folder brings.")
+                   "viewer; replaces the image the plan file names (its \"image\" member) or an MS ILC floor "
+                   "folder brings.")
 @click.option("--floorplan-image-extent", "image_extent", callback=_extent, default=None, metavar="X0,Y0,X1,Y1",
               help="Where the image's left, bottom, right and top edges lie, in the plan's coordinates (lon/lat "
                    "degrees for a WGS84 plan, else metres); default: the plan's bounding box.")

@@ -1,4 +1,5 @@
-"""Floor plans on disk: a user's GeoJSON (``rmbuild ingest --floorplan``) and the workspace's copy.
+"""Floor plans on disk: a user's GeoJSON (``rmbuild ingest --floorplan``, with the raster image it may name)
+and the workspace's copy.
 
 The workspace keeps the plan in local metres (``data/floorplan.geojson``, :func:`rmbuild.floorplan.to_geojson`)
 whatever it came as, so later stages never re-project it. :func:`check_plan_frame` tells whether a plan is in the
