@@ -124,12 +124,12 @@ class RadioMap:
         width = max(3, len(str(len(self.bssids))))
         return [f"WAP{i + 1:0{width}d}" for i in range(len(self.bssids))]
 
-    def wide_table(self, layout: str = "uji", floor: int = 0, lon_lat: np.ndarray | None = None) -> pd.DataFrame:
+    def wide_table(self, layout: str = "uji", floor: int = 0, uji_xy: np.ndarray | None = None) -> pd.DataFrame:
         """One row per cell, one column per AP, +100 = not detected (UJIIndoorLoc's convention).
 
         ``layout="uji"``: exactly UJIIndoorLoc's columns — ``WAP001..WAPnnn`` (the sidecar's ``ap_columns``
         maps them to BSSIDs; RSSI rounded to integer dBm like the original), then LONGITUDE, LATITUDE =
-        ``lon_lat`` (n_cells, 2) when given (UJIIndoorLoc's are Web Mercator metres), else the cell centre's
+        ``uji_xy`` (n_cells, 2) when given (UJIIndoorLoc's are Web Mercator metres), else the cell centre's
         x, y (metres in the map frame), FLOOR = ``floor``,
         BUILDINGID = 0, SPACEID = cell id, RELATIVEPOSITION = 0, USERID = 0, PHONEID = 0, TIMESTAMP = 0.
         ``layout="xy"``: BSSIDs as column names, RSSI unrounded (0.01 dB), then ``x_m``, ``y_m``.
@@ -139,7 +139,7 @@ class RadioMap:
             vals = np.where(det, np.rint(np.nan_to_num(self.mean_dbm)), UJI_NOT_DETECTED).astype(np.int64)
             df = pd.DataFrame(vals, columns=self.wap_names())
             n = len(df)
-            where = self.cells[["x_m", "y_m"]].to_numpy(float) if lon_lat is None else np.asarray(lon_lat, float)
+            where = self.cells[["x_m", "y_m"]].to_numpy(float) if uji_xy is None else np.asarray(uji_xy, float)
             tail = {
                 "LONGITUDE": where[:, 0], "LATITUDE": where[:, 1],
                 "FLOOR": np.full(n, floor, np.int64), "BUILDINGID": np.zeros(n, np.int64),

@@ -150,7 +150,7 @@ def _write_uji(w: StageWriter, rm: RadioMap, floor: int, georef: Georef | None, 
     """The map in UJIIndoorLoc's wide layout and its WAPnnn -> BSSID table (for tools that read the CSV
     alone); LONGITUDE, LATITUDE in Web Mercator metres as UJIIndoorLoc's when the map is on the globe."""
     xy = None if georef is None else georef.to_web_mercator(rm.cells[["x_m", "y_m"]].to_numpy(float))
-    rm.wide_table("uji", floor=floor, lon_lat=xy).to_csv(w.path(csv_key), index=False)
+    rm.wide_table("uji", floor=floor, uji_xy=xy).to_csv(w.path(csv_key), index=False)
     pd.DataFrame({"column": rm.wap_names(), "bssid": [str(b) for b in rm.bssids]}).to_csv(w.path(aps_key),
                                                                                           index=False)
 
