@@ -118,11 +118,16 @@ def test_drawn_under_the_walks_in_the_report_and_the_viewer(sim, tmp_path, capsy
     assert run_cli(capsys, "ingest", data, "-w", ws, "-q", "--floorplan", plan, "--floorplan-image",
                    _png(tmp_path / "f.png", 80, 40)).code == 0
     assert run_cli(capsys, "optimize", "-w", ws, "-q").code == 0
+    assert run_cli(capsys, "export-map", "-w", ws, "-q").code == 0
     r = run_cli(capsys, "report", "-w", ws)
     assert r.code == 0, r.err
-    assert "underneath: the plan's image" in html.unescape((ws / "report.html").read_text())
+    page = html.unescape((ws / "report.html").read_text())
+    assert page.count("underneath: the plan's image") == 2  # the walks and the radio map
     w = Workspace.open(ws)
     image = load_image(w)
+    fig = figures.coverage_figure(w.read_table("map.cell_table"), image=image)
+    assert len(fig.axes[0].images) == 2  # the plan's image under the cells'
+    assert fig.axes[0].images[0].get_extent() == pytest.approx([image[1][0], image[1][2], image[1][1], image[1][3]])
     fig = figures.walks_figure([("a", w.read_dataset().poses)], w.read_dataset().walk_ids(), image=image)
     (im,) = fig.axes[0].images
     assert im.get_extent() == pytest.approx([image[1][0], image[1][2], image[1][1], image[1][3]])

@@ -12,6 +12,7 @@ import pandas as pd
 from rmbuild.config import MapConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.io.anchors import check_anchors, read_anchors
+from rmbuild.io.floor_image import load_image
 from rmbuild.io.workspace import ARTEFACTS, StageWriter, Workspace, level_of_floor
 from rmbuild.radiomap import devices
 from rmbuild.radiomap.build import CELL_COLUMNS, RadioMap
@@ -98,8 +99,9 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
         w.json("map.sidecar", side)
         if georef is not None:  # on the globe: the cells as WGS84 squares
             w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef, plan_name))
-        w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame))
-        w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m))
+        image = load_image(ws) if walls is not None else None  # drawn where the plan is: the building frame
+        w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame, image))
+        w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m, image=image))
         w.config(to_toml(cfg, "map"))
         ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
         report = {

@@ -123,8 +123,17 @@ class Grid:
         return img
 
 
+def _plan_image(ax: Any, image: tuple[np.ndarray, Sequence[float]] | None, alpha: float = 0.45) -> None:
+    """The plan's raster (pixels, extent x0, y0, x1, y1 m; row 0 the top) faded under everything else."""
+    if image is None:
+        return
+    x0, y0, x1, y1 = image[1]
+    ax.imshow(image[0], extent=(x0, x1, y0, y1), origin="upper", alpha=alpha, zorder=-1, interpolation="bilinear")
+
+
 def _draw_grid(ax: Any, grid: Grid, img: np.ndarray, norm: Any, walls: np.ndarray | None,
-               fixes_xy: np.ndarray | None = None) -> Any:
+               fixes_xy: np.ndarray | None = None, image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
+    _plan_image(ax, image)
     im = ax.imshow(img, origin="lower", extent=grid.extent, cmap=_cmap(), norm=norm, interpolation="nearest",
                    zorder=0)
     _walls(ax, walls)
@@ -154,12 +163,13 @@ def strongest_aps(cells: pd.DataFrame, top_n: int) -> pd.Series:
 
 
 def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell_size_m: float | None = None,
-                    fixes_xy: np.ndarray | None = None) -> Any:
+                    fixes_xy: np.ndarray | None = None, image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
     """Mean RSSI per cell of the ``top_n`` APs with the highest peak cell mean, one panel each, one colour
     scale over the full range of what is drawn.
 
     ``cells``: the radio map's long table (ix, iy, x_m, y_m, bssid, rssi_mean_dbm, ...; x_m, y_m cell
-    centres in the map frame); ``walls`` (n, 4) m and ``fixes_xy`` (n, 2) m in that frame. None without data.
+    centres in the map frame); ``walls`` (n, 4) m, ``fixes_xy`` (n, 2) m and the plan's ``image`` (pixels,
+    extent m) in that frame. None without data.
     """
     need = {"ix", "iy", "bssid", "rssi_mean_dbm", "x_m", "y_m"}
     if cells is None or len(cells) == 0 or not need <= set(cells.columns):
@@ -179,7 +189,7 @@ def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell
     for k, (ax, (ap, pk)) in enumerate(zip(axes.flat, peak.items())):
         g = shown[shown["bssid"] == ap]
         im = _draw_grid(ax, grid, grid.image(g, g["rssi_mean_dbm"].to_numpy(dtype=float)), norm,
-                        walls_array(walls), fixes_xy)
+                        walls_array(walls), fixes_xy, image)
         ax.set_title(f"{ap} (peak {pk:.0f} dBm)", fontsize=9)
         _xy_axes(ax, left=k % ncol == 0, bottom=k // ncol == nrow - 1 or k + ncol >= len(peak))
     for ax in list(axes.flat)[len(peak):]:
@@ -190,9 +200,10 @@ def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell
 
 
 def coverage_figure(cells: pd.DataFrame, cell_size_m: float | None = None, walls: Any = None,
-                    frame: str | None = None) -> Any:
+                    frame: str | None = None, image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
     """Scans per visited cell (same colour map as the heat maps; log scale from :data:`LOG_COUNT_FROM`
-    scans), cells filled by interpolation in grey. ``cells``: ix, iy, x_m, y_m, n_scans, interpolated."""
+    scans), cells filled by interpolation in grey, over the plan's ``image`` (pixels, extent m) when given.
+    ``cells``: ix, iy, x_m, y_m, n_scans, interpolated."""
     from matplotlib.colors import LogNorm, Normalize
 
     grid = Grid(cells, cell_size_m)
@@ -207,7 +218,7 @@ def coverage_figure(cells: pd.DataFrame, cell_size_m: float | None = None, walls
     if interp.any():
         ax.imshow(grid.image(cells, np.where(interp, 1.0, np.nan)), origin="lower", extent=grid.extent,
                   cmap="Greys", vmin=0, vmax=4, interpolation="nearest", zorder=0)
-    im = _draw_grid(ax, grid, img, norm, walls_array(walls))
+    im = _draw_grid(ax, grid, img, norm, walls_array(walls), image=image)
     fig.colorbar(im, ax=ax, label="scans per cell", shrink=0.85)
     _xy_axes(ax)
     ax.set_title(_wrapped(f"coverage: {int((~interp).sum())} visited cells"
@@ -264,10 +275,7 @@ def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequenc
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     any_fix = False
     for k, (ax, (title, poses)) in enumerate(zip(axes, panels)):
-        if image is not None:
-            x0, y0, x1, y1 = image[1]
-            ax.imshow(image[0], extent=(x0, x1, y0, y1), origin="upper", alpha=0.45, zorder=0,
-                      interpolation="bilinear")
+        _plan_image(ax, image)
         _walls(ax, walls, color="0.45")
         if truth is not None:
             for _, g in truth.groupby("walk_id", sort=False):

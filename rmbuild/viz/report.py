@@ -325,9 +325,10 @@ def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, 
     sidecar = ws.read_json("map.sidecar") if ws.exists("map.sidecar") else {}
     cell_size = ((sidecar or {}).get("grid") or {}).get("cell_size_m")
     frame = (sidecar or {}).get("frame")
+    in_building = frame == "building" or gauge in BUILDING_FRAME_GAUGES
 
     def to_map(xy: np.ndarray) -> np.ndarray | None:  # building frame -> map frame, None when unknown
-        if frame == "building" or gauge in BUILDING_FRAME_GAUGES:
+        if in_building:
             return xy
         if rt is None:
             return None
@@ -336,14 +337,16 @@ def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, 
 
     walls_map = None if walls is None else to_map(walls.reshape(-1, 2))
     fixes_map = None if fixes is None else to_map(fixes[["x_m", "y_m"]].to_numpy(dtype=float))
+    image = load_image(ws) if in_building else None  # the raster is not turned into a walk's frame
     fig = figures.heatmaps_figure(cells, heatmap_top_n, None if walls_map is None else walls_map.reshape(-1, 4),
-                                  cell_size, fixes_map)
+                                  cell_size, fixes_map, image)
     if fig is None:
         missing["map"] = "the radio map table has no usable rows"
         return []
     caption = ("Mean RSSI per cell (dBm) in the map frame, one colour scale from the weakest to the strongest "
                "value drawn; empty cells were never visited")
     caption += "; dark lines: floor plan" if walls_map is not None else ""
+    caption += "; underneath: the plan's image" if image is not None else ""
     caption += "; grey dots: waypoints / position fixes" if fixes_map is not None else ""
     return [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig), caption + ".")]
 
