@@ -178,3 +178,15 @@ def test_bad_images_and_extents_are_one_line_errors(sim, tmp_path, capsys, args,
     assert r.code == 2 and said in r.err and "Traceback" not in r.err
     assert len(r.err.strip().splitlines()) <= 2  # click's usage errors add a "Usage:" line
     assert not (tmp_path / "ws").exists()
+
+
+def test_an_image_over_the_pixel_bound_is_refused_before_decoding(tmp_path, monkeypatch):
+    from rmbuild.errors import InputError
+    from rmbuild.io import floor_image
+
+    monkeypatch.setattr(floor_image, "MAX_IMAGE_PIXELS", 50 * 40 - 1)
+    with pytest.raises(InputError, match="50 x 40 pixels") as e:
+        floor_image.read_image(_png(tmp_path / "f.png", 50, 40))
+    assert "f.png" in str(e.value)
+    monkeypatch.setattr(floor_image, "MAX_IMAGE_PIXELS", 50 * 40)
+    assert floor_image.decode(floor_image.read_image(tmp_path / "f.png")).shape == (40, 50, 3)

@@ -20,8 +20,8 @@ from rmbuild.io.workspace import ARTEFACTS, Workspace
 
 #: px; the long side of the kept image (a floor of 250 m at ~0.12 m per pixel)
 DISPLAY_MAX_PX = 2048
-#: pixels; a larger image is refused before it is decoded (bounded memory)
-MAX_IMAGE_PIXELS = 200_000_000
+#: pixels; a larger image is refused before it is decoded (bounded memory: ~400 MB as RGBA)
+MAX_IMAGE_PIXELS = 100_000_000
 #: bytes; a larger image file is refused before it is read
 MAX_IMAGE_BYTES = 256 * 1024 * 1024
 
@@ -36,7 +36,7 @@ def read_image(path: str | Path) -> bytes:
         if p.stat().st_size > MAX_IMAGE_BYTES:
             raise InputError(f"floor plan image larger than {MAX_IMAGE_BYTES // 2**20} MB", str(p))
         with warnings.catch_warnings():
-            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # the bound is MAX_IMAGE_PIXELS
             with Image.open(p) as im:
                 if im.width * im.height > MAX_IMAGE_PIXELS:
                     raise InputError(f"floor plan image of {im.width} x {im.height} pixels: more than "
@@ -53,7 +53,7 @@ def read_image(path: str | Path) -> bytes:
         raise InputError("not an image Pillow can read (PNG, JPEG, TIFF, ...)", str(p)) from None
     except OSError as e:
         raise InputError(f"cannot read floor plan image: {e.strerror or str(e)[:200]}", str(p)) from None
-    except (ValueError, Image.DecompressionBombWarning, Image.DecompressionBombError) as e:
+    except (ValueError, Image.DecompressionBombError) as e:
         raise InputError(f"unusable floor plan image: {str(e)[:200]}", str(p)) from None
 
 
