@@ -157,6 +157,18 @@ def from_ilc(geojson: dict, width_m: float, height_m: float, name: str = "") -> 
     return FloorPlan(plan.walkable, plan.outline, plan.obstacles, ref, name)
 
 
+def covered_share(plan: FloorPlan, centres: np.ndarray, cell_m: float) -> dict:
+    """How much of the plan's walkable space square cells of ``cell_m`` at ``centres`` (n, 2) m cover:
+    {"walkable_m2", "covered_m2" (the cells' union within walkable space), "share"}."""
+    c = np.asarray(centres, float).reshape(-1, 2)
+    h = cell_m / 2.0
+    cells = shapely.union_all(shapely.box(c[:, 0] - h, c[:, 1] - h, c[:, 0] + h, c[:, 1] + h)) if len(c) else None
+    walkable = float(plan.walkable.area)
+    covered = 0.0 if cells is None else float(shapely.intersection(cells, plan.walkable).area)
+    return {"walkable_m2": round(walkable, 1), "covered_m2": round(covered, 1),
+            "share": round(covered / walkable, 4) if walkable > 0 else None}
+
+
 def lonlat_to_enu(lon0: float, lat0: float):
     """A function (n, 2) lon/lat -> (n, 2) east/north metres about (lon0, lat0) on the WGS84 ellipsoid."""
     from pyproj import Transformer

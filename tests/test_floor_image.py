@@ -123,6 +123,8 @@ def test_drawn_under_the_walks_in_the_report_and_the_viewer(sim, tmp_path, capsy
     assert r.code == 0, r.err
     page = html.unescape((ws / "report.html").read_text())
     assert page.count("underneath: the plan's image") == 2  # the walks and the radio map
+    cov = Workspace.open(ws).read_report("map")["plan_coverage"]
+    assert 0.2 < cov["share"] <= 1.0 and cov["covered_m2"] <= cov["walkable_m2"]
     w = Workspace.open(ws)
     image = load_image(w)
     fig = figures.coverage_figure(w.read_table("map.cell_table"), image=image)
@@ -190,3 +192,14 @@ def test_an_image_over_the_pixel_bound_is_refused_before_decoding(tmp_path, monk
     assert "f.png" in str(e.value)
     monkeypatch.setattr(floor_image, "MAX_IMAGE_PIXELS", 50 * 40)
     assert floor_image.decode(floor_image.read_image(tmp_path / "f.png")).shape == (40, 50, 3)
+
+
+def test_covered_share_of_the_walkable_space():
+    from rmbuild.floorplan import covered_share, from_features
+
+    plan = from_features([{"type": "Feature", "properties": {"type": "floor"}, "geometry": {
+        "type": "Polygon", "coordinates": [[[0, 0], [20, 0], [20, 10], [0, 10], [0, 0]]]}}], lambda a: a)
+    # two 2 m cells inside, one half outside the floor, one overlapping the first: 4 + 4 + 2 m² of 200
+    c = covered_share(plan, np.array([[1.0, 1.0], [5.0, 5.0], [20.0, 5.0], [1.0, 1.0]]), 2.0)
+    assert c == {"walkable_m2": 200.0, "covered_m2": 10.0, "share": 0.05}
+    assert covered_share(plan, np.zeros((0, 2)), 2.0)["covered_m2"] == 0.0

@@ -42,6 +42,10 @@ def export_map(workspace, anchors_path, cell_size_m, floor, rerun, config_path, 
 def _summary(r: dict, where) -> None:
     click.echo(f"radio map: {r['cells']} cells of {r['cell_size_m']:g} m, {r['aps']} APs, "
                f"{r['reference_nodes']} reference nodes, {_frame(r['frame'])} -> {where}")
+    cov = r.get("plan_coverage")
+    if cov and cov.get("share") is not None:
+        click.echo(f"the map's visited cells cover {cov['share']:.0%} of the floor plan's walkable space "
+                   f"({cov['covered_m2']:,.0f} of {cov['walkable_m2']:,.0f} m²)")
     ble = r.get("ble")
     if ble and "skipped" in ble:
         click.echo(f"note: no BLE radio map: {ble['skipped']}", err=True)

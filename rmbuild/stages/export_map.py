@@ -115,6 +115,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             "cell_size_m": cfg.cell_size_m,
             "cells_geojson": ARTEFACTS["map.cells_geojson"] if georef is not None else None,
             "uji_coordinates": _uji_coordinates(georef),
+            "plan_coverage": _plan_coverage(plan_doc, rm) if walls is not None else None,
             "histograms": None if rm.histograms is None else {
                 "entries": len(rm.histograms), "bin_db": rm.histograms.bin_db,
                 "n_directions": rm.histograms.n_directions,
@@ -141,6 +142,17 @@ def _ble_map(ble: pd.DataFrame | None, xy: np.ndarray, walk_of_node: np.ndarray,
         return build_radio_map(ble, xy, walk_of_node, cfg, rm.origin_xy, frame=rm.frame), None
     except InputError as e:
         return None, {"skipped": str(e).replace("Wi-Fi", "BLE")}
+
+
+def _plan_coverage(plan_doc: dict | None, rm: RadioMap) -> dict | None:
+    """How much of the floor plan's walkable space the map's visited cells cover (the map in the plan's
+    frame), None without a plan."""
+    if plan_doc is None:
+        return None
+    from rmbuild.floorplan import covered_share, from_local_geojson
+
+    visited = rm.cells[~rm.cells["interpolated"].to_numpy(bool)] if "interpolated" in rm.cells else rm.cells
+    return covered_share(from_local_geojson(plan_doc), visited[["x_m", "y_m"]].to_numpy(float), rm.cell_size_m)
 
 
 def _uji_coordinates(georef: Georef | None) -> str:
