@@ -125,6 +125,15 @@ def test_drawn_under_the_walks_in_the_report_and_the_viewer(sim, tmp_path, capsy
     assert page.count("underneath: the plan's image") == 2  # the walks and the radio map
     cov = Workspace.open(ws).read_report("map")["plan_coverage"]
     assert 0.2 < cov["share"] <= 1.0 and cov["covered_m2"] <= cov["walkable_m2"]
+    # every key figure the report lists is in its stage's report (a misspelt key would drop its row)
+    from rmbuild.viz.report import KEY_FIGURES, _get
+
+    reports = {s: Workspace.open(ws).read_report(s) for s in ("ingest", "optimize", "map")}
+    absent = [k for s, k, _ in KEY_FIGURES if s in reports and _get(reports[s], k) is None]
+    optional = {"ble.readings", "ble.beacons", "ble.cells",  # no BLE in this input
+                "optimized.landmark_error_unlinked_at_raw_m.mean"}  # every walk linked
+    assert set(absent) <= optional, absent
+    assert "radio map cells" in page and "walkable space the map" in page
     w = Workspace.open(ws)
     image = load_image(w)
     fig = figures.coverage_figure(w.read_table("map.cell_table"), image=image)

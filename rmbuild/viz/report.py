@@ -65,9 +65,10 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("optimize", "optimized.landmark_error_unlinked_at_raw_m.mean",
      "optimised landmark error mean, unlinked walks at their raw placement (m)"),
     ("optimize", "time_s.stage_total", "optimise time (s)"),
-    ("map", "n_cells", "radio map cells"),
-    ("map", "n_aps", "radio map APs"),
+    ("map", "cells", "radio map cells"),
+    ("map", "aps", "radio map APs"),
     ("map", "cell_size_m", "cell size (m)"),
+    ("map", "plan_coverage.share", "share of the floor plan's walkable space the map's cells cover"),
     ("map", "ble.cells", "BLE radio map cells (map/radiomap_ble.*)"),
     ("map", "ble.beacons", "BLE radio map beacons"),
 )
