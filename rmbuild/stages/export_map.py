@@ -55,10 +55,38 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
          viewer: Viewer) -> dict:
     from rmbuild.radiomap import build_radio_map
     from rmbuild.stages.localize_geojson import find_georef  # the plan's georeference (shapely, pyproj)
-    from rmbuild.stages.map_geojson import cells_feature_collection
 
     t0 = time.perf_counter()
     ds = ws.read_dataset()
+    xy, info = _positions(ws, ds, cfg, anchors_path, force)
+    progress.phase("rasterising")
+    walk_of_node = ds.poses["walk_id"].astype(str).to_numpy()
+    offsets = info["device_offsets_db"]
+    rm = build_radio_map(devices.corrected(ds, offsets).wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    rm.device_offsets_db = offsets
+    ble_rm, ble_skipped = _ble_map(ds.ble, xy, walk_of_node, cfg, rm)
+    t_build = time.perf_counter() - t0
+    plan_doc = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
+    walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
+    progress.phase("writing map")
+    georef, plan_name, _, _ = find_georef(ws, rm.frame)
+    floor = level_of_floor(ws.root) or 0
+    with ws.writing("map") as w:
+        _write_wifi(w, ws, rm, cfg, info, walls, georef, plan_name, floor)
+        ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
+        report = _report(rm, cfg, info, georef, _plan_coverage(plan_doc, rm) if walls is not None else None)
+        report["time_s"] = {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)}
+        if ble_report is not None:
+            report["ble"] = ble_report
+        w.report = report
+    log_workspace(ws, viewer)
+    return report
+
+
+def _positions(ws: Workspace, ds, cfg: MapConfig, anchors_path: str | Path | None, force: bool
+               ) -> tuple[np.ndarray, dict]:
+    """The nodes' positions the map is built from and what export-map says of their frame (``--anchors``
+    applied when the map is not in the building frame already)."""
     xy, info = built_positions(ws, ds, cfg)
     ws.check_can_write("map", force)
     if anchors_path is None and ws.exists("optimize.anchors"):
@@ -72,62 +100,54 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
             check_anchors(anchors, ds)
             xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), anchors)
             info.update(extra)
-    progress.phase("rasterising")
-    walk_of_node = ds.poses["walk_id"].astype(str).to_numpy()
-    offsets = info["device_offsets_db"]
-    rm = build_radio_map(devices.corrected(ds, offsets).wifi, xy, walk_of_node, cfg, frame=info["frame"])
-    rm.device_offsets_db = offsets
-    ble_rm, ble_skipped = _ble_map(ds.ble, xy, walk_of_node, cfg, rm)
-    t_build = time.perf_counter() - t0
-    plan_doc = ws.read_json("data.floorplan") if ws.exists("data.floorplan") else None
-    walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
-    progress.phase("writing map")
+    return xy, info
+
+
+def _write_wifi(w: StageWriter, ws: Workspace, rm: RadioMap, cfg: MapConfig, info: dict, walls: np.ndarray | None,
+                georef: Georef | None, plan_name: str, floor: int) -> None:
+    """The Wi-Fi map's tables, CSVs, sidecar, GeoJSON (on the globe) and pictures (over the plan's walls and
+    image in the building frame)."""
+    from rmbuild.stages.map_geojson import cells_feature_collection
+
     node_pos = pd.DataFrame({"node": rm.nodes.node, "walk": rm.node_walk, "x_m": rm.node_xy[:, 0],
                              "y_m": rm.node_xy[:, 1]})
-    georef, plan_name, _, _ = find_georef(ws, rm.frame)
-    floor = level_of_floor(ws.root) or 0
-    with ws.writing("map") as w:
-        long = rm.long_table()
-        w.table("map.cells", long)
-        w.table("map.cell_table", rm.cells[list(CELL_COLUMNS)])
-        w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
-        _write_uji(w, rm, floor, georef, "map.wide_csv", "map.wide_csv_aps")
-        if rm.histograms is not None:
-            w.table("map.histograms", rm.histograms.long_table(rm.bssids, rm.cells))
-        side = rm.sidecar()
-        side.update(frame_info=info, uji_coordinates=_uji_coordinates(georef))
-        w.json("map.sidecar", side)
-        if georef is not None:  # on the globe: the cells as WGS84 squares
-            w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef, plan_name))
-        image = load_image(ws) if walls is not None else None  # drawn where the plan is: the building frame
-        w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame, image))
-        w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m, image=image))
-        w.config(to_toml(cfg, "map"))
-        ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
-        report = {
-            "stage": "export-map",
-            "frame": info["frame"],
-            "frame_info": info,
-            "cells": int(rm.n_cells),
-            "cells_interpolated": int(rm.cells["interpolated"].sum()) if "interpolated" in rm.cells else 0,
-            "reference_nodes": len(rm.nodes),
-            "aps": len(rm.bssids),
-            "cell_size_m": cfg.cell_size_m,
-            "cells_geojson": ARTEFACTS["map.cells_geojson"] if georef is not None else None,
-            "uji_coordinates": _uji_coordinates(georef),
-            "plan_coverage": _plan_coverage(plan_doc, rm) if walls is not None else None,
-            "histograms": None if rm.histograms is None else {
-                "entries": len(rm.histograms), "bin_db": rm.histograms.bin_db,
-                "n_directions": rm.histograms.n_directions,
-                "readings_with_direction": float(rm.histograms.count[rm.histograms.sector >= 0].sum()
-                                                 / max(rm.histograms.count.sum(), 1))},
-            "time_s": {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)},
-        }
-        if ble_report is not None:
-            report["ble"] = ble_report
-        w.report = report
-    log_workspace(ws, viewer)
-    return report
+    long = rm.long_table()
+    w.table("map.cells", long)
+    w.table("map.cell_table", rm.cells[list(CELL_COLUMNS)])
+    w.table("map.nodes", rm.nodes.to_long().merge(node_pos, on="node", how="left"))
+    _write_uji(w, rm, floor, georef, "map.wide_csv", "map.wide_csv_aps")
+    if rm.histograms is not None:
+        w.table("map.histograms", rm.histograms.long_table(rm.bssids, rm.cells))
+    side = rm.sidecar()
+    side.update(frame_info=info, uji_coordinates=_uji_coordinates(georef))
+    w.json("map.sidecar", side)
+    if georef is not None:  # on the globe: the cells as WGS84 squares
+        w.json("map.cells_geojson", cells_feature_collection(rm.cells, long, rm.cell_size_m, georef, plan_name))
+    image = load_image(ws) if walls is not None else None  # drawn where the plan is: the building frame
+    w.figure("map.coverage_png", coverage_figure(rm.cells, rm.cell_size_m, walls, rm.frame, image))
+    w.figure("map.heatmaps_png", heatmaps_figure(long, cfg.heatmap_top_n, walls, rm.cell_size_m, image=image))
+    w.config(to_toml(cfg, "map"))
+
+
+def _report(rm: RadioMap, cfg: MapConfig, info: dict, georef: Georef | None, plan_coverage: dict | None) -> dict:
+    """export-map's report (without its times and the BLE map's part)."""
+    hist = rm.histograms
+    return {
+        "stage": "export-map",
+        "frame": info["frame"],
+        "frame_info": info,
+        "cells": int(rm.n_cells),
+        "cells_interpolated": int(rm.cells["interpolated"].sum()) if "interpolated" in rm.cells else 0,
+        "reference_nodes": len(rm.nodes),
+        "aps": len(rm.bssids),
+        "cell_size_m": cfg.cell_size_m,
+        "cells_geojson": ARTEFACTS["map.cells_geojson"] if georef is not None else None,
+        "uji_coordinates": _uji_coordinates(georef),
+        "plan_coverage": plan_coverage,
+        "histograms": None if hist is None else {
+            "entries": len(hist), "bin_db": hist.bin_db, "n_directions": hist.n_directions,
+            "readings_with_direction": float(hist.count[hist.sector >= 0].sum() / max(hist.count.sum(), 1))},
+    }
 
 
 def _ble_map(ble: pd.DataFrame | None, xy: np.ndarray, walk_of_node: np.ndarray, cfg: MapConfig, rm: RadioMap,
