@@ -71,6 +71,23 @@ def test_rf_disagreement_raises_the_prediction_and_support_leaves_it():
     assert pred[2] == pytest.approx(base[2] * np.exp(5.0 * uncertainty.RF_INFLATION), rel=1e-9)
 
 
+def test_a_walk_placed_by_a_continuity_tie_keeps_the_ties_uncertainty():
+    """c's component was attached by a device's continuity tie: its figure is combined with the median tie
+    sigma (root sum of squares); the walks placed by their own radio keep theirs; without ties, unchanged."""
+    walks = three_walks()
+    pk, pq = pairs(walks)
+    s = walks.starts
+    ties = Ties(np.array([s[1] + STEPS - 1, s[0]]), np.array([s[2], s[2] + 5]), np.array([6.0, 10.0]))
+    args = (walks, poses_of(walks), np.ones(3, bool), pk, pq, ties, np.zeros(3, bool), None)
+    base = uncertainty.predicted_errors(*args)
+    pred = uncertainty.predicted_errors(*args, np.array([False, False, True]))
+    np.testing.assert_allclose(pred[:2], base[:2], rtol=1e-12)
+    assert pred[2] == pytest.approx(np.hypot(base[2], 8.0), rel=1e-9)  # the median of 6 and 10 m
+    no_tie = uncertainty.predicted_errors(walks, poses_of(walks), np.ones(3, bool), pk, pq, no_ties(),
+                                          np.zeros(3, bool), None, np.array([False, False, True]))
+    np.testing.assert_allclose(no_tie, predict(), rtol=1e-12)
+
+
 def test_unlinked_warning_names_the_groups_of_unlinked_walks():
     """Unlinked walks placed against each other are one group each (their component): the warning counts
     them, largest first, and says nothing of groups when every unlinked walk is alone."""

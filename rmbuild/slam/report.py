@@ -26,7 +26,8 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
     linked = placement.linked & walks.keep
     cross = pairs[pairs["kind"] == "cross"]
     pred = predicted_errors(walks, final_xyt, linked, cross["node_k"].to_numpy(), cross["node_q"].to_numpy(), ties,
-                            np.asarray(placement.heading_known, bool), placement.rf_log_lr)
+                            np.asarray(placement.heading_known, bool), placement.rf_log_lr,
+                            np.asarray(placement.method) == "continuity")
     T = placement.world_T_walk
     anchored = placement.anchored if placement.anchored is not None else np.zeros(n_walks, bool)
     return pd.DataFrame({

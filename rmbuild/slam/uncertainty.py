@@ -12,7 +12,13 @@ The covariance knows how much evidence holds a walk, not whether the evidence is
 a position tie (its previous recording's end) that its own scans contradict got one of the smallest
 figures. So the figure grows with the RF check's disagreement: times exp(RF_INFLATION * (RF_LOG_LR_TRUSTED
 - mean log likelihood ratio)) for a walk whose scans support its place less than RF_LOG_LR_TRUSTED (walks
-the check did not judge: unchanged). Pairs of consecutive scans are not independent, so the covariance
+the check did not judge: unchanged). And a walk whose component a continuity tie placed (a device's next
+recording attached where the last one ended: the radio could not join them) keeps that join's
+uncertainty whatever pairs the solve found afterwards: its figure is combined (root sum of squares) with
+the data set's median tie sigma (each tie's: 2 m + 0.4 m/s times its gap). On MS ILC site1/F1 such
+walks were a median 8.0 m off against 3.9 m for those placed by their own radio, with predicted figures of
+5.6 and 5.0 m; with the tie's sigma the rank correlation went 0.34 -> 0.48 there, and was unchanged on
+F2, B1, F6 and IPIN (docs/optimize.md). Pairs of consecutive scans are not independent, so the covariance
 alone is too small; CALIBRATION scales the product to the walks' median real error (docs/optimize.md: on
 five real floors the median ratio real / predicted was 0.8-3.4 before it, median 2.0; the rank correlation
 with the real per-walk error, each floor with the inflation's two numbers chosen on the other four, went
@@ -52,10 +58,12 @@ def walk_frames(walks: WalkSet, poses: np.ndarray) -> np.ndarray:
 
 
 def predicted_errors(walks: WalkSet, poses: np.ndarray, placed: np.ndarray, pk: np.ndarray, pq: np.ndarray,
-                     ties: Ties, compass: np.ndarray, rf_log_lr: np.ndarray | None = None) -> np.ndarray:
+                     ties: Ties, compass: np.ndarray, rf_log_lr: np.ndarray | None = None,
+                     tied: np.ndarray | None = None) -> np.ndarray:
     """(n_walks,) predicted placement error (m) of each ``placed`` walk (module docstring). ``pk``, ``pq``:
     the cross-walk pairs of the final solve; ``compass``: walks with a trusted compass; ``rf_log_lr``: the
-    RF check's mean log likelihood ratio per walk (NaN or None: not judged)."""
+    RF check's mean log likelihood ratio per walk (NaN or None: not judged); ``tied``: walks whose component
+    a continuity tie placed."""
     out = np.full(walks.n_walks, np.nan)
     act = np.flatnonzero(placed)
     if len(act) < 2 or len(act) > MAX_WALKS:
@@ -72,6 +80,9 @@ def predicted_errors(walks: WalkSet, poses: np.ndarray, placed: np.ndarray, pk: 
     radius = np.array([geometry.extent_m(walks.raw[walks.starts[w]:walks.ends[w], :2]) for w in act])
     var = C[i, i] + C[i + 1, i + 1] + C[i + 2, i + 2] * radius**2
     out[act] = CALIBRATION * np.sqrt(np.maximum(var, 0.0)) * rf_inflation(rf_log_lr, walks.n_walks)[act]
+    if tied is not None and len(ties.sigma_m):
+        on_tie = np.asarray(tied, bool) & np.isfinite(out)
+        out[on_tie] = np.hypot(out[on_tie], float(np.median(ties.sigma_m)))
     return out
 
 
