@@ -191,8 +191,9 @@ def build_report(ws: Workspace, heatmap_top_n: int = 6) -> Report:
     ds = ws.read_dataset()
     walls = _plan_segments(ws, ds)
     gauge = (reports.get("optimize") or {}).get("gauge")
-    figs, rt = _walk_figures(ws, ds, gauge, walls, missing)
-    figs += _map_figures(ws, heatmap_top_n, gauge, rt, walls, _fixes_of(ds), missing)
+    image = load_image(ws)  # the plan's raster, decoded once for every figure drawn over it
+    figs, rt = _walk_figures(ws, ds, gauge, (walls, image), missing)
+    figs += _map_figures(ws, heatmap_top_n, gauge, rt, (walls, image), _fixes_of(ds), missing)
     eval_figs, eval_rows = _evaluation(ws, reports.get("evaluate"), missing)
     page = _page(ws, figs + eval_figs, missing, eval_rows, reports, _walks_html(ws, ds, rt, gauge))
     return Report(page, figs + eval_figs, missing)
@@ -265,10 +266,11 @@ def _after_panel(opt: pd.DataFrame, ds: Any, gauge: str | None, fixes: pd.DataFr
     return (f"after: optimised; one SE(2) for all walks, fitted to {how}", shown), rt, True, unplaced
 
 
-def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray | None,
+def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, plan: tuple[np.ndarray | None, Any],
                   missing: dict[str, str]) -> tuple[list[ReportFigure], Any]:
     """The walks before/after the optimisation and the optimiser's cost; also the optimiser-to-building
-    transform (None when unknown)."""
+    transform (None when unknown). ``plan``: its walls (n, 4) m and raster image, each None when absent."""
+    walls, plan_image = plan
     fixes = _fixes_of(ds)
     before, building = _before_panel(ds, fixes)
     panels, panel_fixes = [before], [fixes if building else None]
@@ -282,7 +284,7 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     else:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
     drawn_walls = walls if all_building else None
-    image = load_image(ws) if all_building else None
+    image = plan_image if all_building else None
     fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls,
                                fixes=panel_fixes, image=image)
     caption = "Coloured: one colour per walk"  # and only what is drawn
@@ -317,8 +319,9 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, walls: np.ndarray |
     return figs, rt
 
 
-def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, walls: np.ndarray | None,
+def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, plan: tuple[np.ndarray | None, Any],
                  fixes: pd.DataFrame | None, missing: dict[str, str]) -> list[ReportFigure]:
+    walls, plan_image = plan
     if not (ws.has("map") and ws.exists("map.cells")):
         missing["map"] = "export-map has not run"
         return []
@@ -338,7 +341,7 @@ def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, 
 
     walls_map = None if walls is None else to_map(walls.reshape(-1, 2))
     fixes_map = None if fixes is None else to_map(fixes[["x_m", "y_m"]].to_numpy(dtype=float))
-    image = load_image(ws) if in_building else None  # the raster is not turned into a walk's frame
+    image = plan_image if in_building else None  # the raster is not turned into a walk's frame
     fig = figures.heatmaps_figure(cells, heatmap_top_n, None if walls_map is None else walls_map.reshape(-1, 4),
                                   cell_size, fixes_map, image)
     if fig is None:

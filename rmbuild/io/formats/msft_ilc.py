@@ -471,10 +471,9 @@ class MsftIlcReader(Reader):
         for p in plans.values():
             notes.append(f"floor plan: {p['name'] or 'geojson_map.json'} with its extent from floor_info.json"
                          + (" and its image floor_image.png" if "image" in p else ""))
-        used = set()
-        if plans:
-            used = {"geojson_map.json", "floor_info.json", *(["floor_image.png"] if any(
-                "image" in p for p in plans.values()) else [])}
+        used = {"geojson_map.json", "floor_info.json"} if plans else set()
+        if any("image" in p for p in plans.values()):
+            used.add("floor_image.png")
         unused = sorted({f.name for f in files if f.name in COMPANION_FILES} - used)
         if unused:
             notes.append(f"companion files not used: {', '.join(unused)}")
