@@ -11,7 +11,7 @@ REAL_DATA ?= datasets/msft-ilc20/site1/F1
 
 RM_CLI := MPLBACKEND=Agg $(BIN)/rmbuild
 
-.PHONY: venv run run-real test bench bench-real fuzz lint clean
+.PHONY: venv run run-real test bench bench-real bench-scan-rate fuzz lint clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (rmbuild needs Python 3.11)"; exit 2; }
@@ -73,6 +73,11 @@ bench: $(STAMP)
 ## Options through BENCH_REAL_ARGS, e.g. BENCH_REAL_ARGS="--floors F1,F4 --out real_after"
 bench-real: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.bench_real $(BENCH_REAL_ARGS)
+
+## make bench-scan-rate: bench-real on copies of the real floors with fewer Wi-Fi scans (one per 5 s or 10 s,
+## Android 9's four per two minutes); bench/results/scan_rate.json and scan_rate.md
+bench-scan-rate: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m bench.bench_scan_rate
 
 ## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap, kill -9 / SIGINT
 ## fault injection into every stage, degraded evidence; figures go to bench/results/{fuzz,faults,degraded}.json

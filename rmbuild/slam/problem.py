@@ -57,6 +57,16 @@ class WalkSet:
         """Walked length (m) of each walk."""
         return walked_lengths(self.path, self.walk_of, self.n_walks)
 
+    def scan_density(self) -> tuple[float, float]:
+        """(median metres walked between consecutive Wi-Fi scans of a walk, median scans per walk with any);
+        NaN where there are none."""
+        node = self.fingerprints.node
+        per_walk = np.bincount(self.walk_of[node], minlength=self.n_walks)
+        same = self.walk_of[node[1:]] == self.walk_of[node[:-1]]
+        gaps = np.diff(self.path[node])[same]
+        spacing = float(np.median(gaps)) if len(gaps) else float("nan")
+        return spacing, float(np.median(per_walk[per_walk > 0])) if per_walk.any() else float("nan")
+
     def apply_frames(self, T: np.ndarray, raw: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) poses with walk w's own-frame poses (``raw`` or ``self.raw``) mapped by T[w] (n_walks, 3)."""
         raw = self.raw if raw is None else raw

@@ -49,6 +49,13 @@ ACROSS_TOL = 0.02
 # deg; a walk whose pose headings differ from its direction of motion by more than this (median over its
 # steps; e.g. a device yaw instead of a step heading) keeps isotropic pairs, with a warning.
 HEADING_MOTION_MAX_DEG = 20.0
+# Scans sparser than this along the walks (median metres walked between consecutive scans of a walk), or
+# fewer per walk than SPARSE_SCANS_PER_WALK, get a warning. With the real floors' scans thinned (docs/
+# optimize.md, "Scan rate") MS ILC site1/F1 linked 88 of 106 walks with its own scans (2.6 m apart, 14 per
+# walk), 41 with one scan per 5 s (6.9 m, 5 per walk), 19 with Android 9's four per two minutes (2.8 m,
+# 4 per walk); IPIN 2023 -2 (2.1 m, 34 per walk) kept 28 of 28 at 6.1 m, 14 per walk, and 20 at 9.9 m.
+SPARSE_SCAN_SPACING_M = 4.0
+SPARSE_SCANS_PER_WALK = 8
 
 CandidatesHook = Callable[[pd.DataFrame, WalkSet], pd.DataFrame]
 
@@ -79,6 +86,9 @@ class WifiSource(EvidenceSource):
         self.warnings: list[str] = []
         self.cfg = cfg
         self.walks = walks
+        self.density = walks.scan_density()
+        line = sparse_scans_warning(*self.density)
+        self.warnings += [line] if line else []
         self.compared = powed.compared(walks, cfg)
         fp = self.compared.fingerprints
         self.rss = RssMatrix.from_fingerprints(fp, cfg.fill_dbm)
@@ -252,7 +262,24 @@ class WifiSource(EvidenceSource):
                 "estimated_from_pairs": self.across_n, "rf_model": self.rf.report(),
                 "device_offsets_db": {d: round(v, 2) for d, v in self.compared.offsets_db.items()},
                 "rss_exponent": self.compared.beta,
-                "rss_exponent_auc": {str(b): round(a, 4) for b, a in self.compared.auc.items()}}
+                "rss_exponent_auc": {str(b): round(a, 4) for b, a in self.compared.auc.items()},
+                "scan_spacing_m": _rounded(self.density[0]), "scans_per_walk": _rounded(self.density[1])}
+
+
+def _rounded(v: float) -> float | None:
+    return round(v, 2) if np.isfinite(v) else None
+
+
+def sparse_scans_warning(spacing_m: float, per_walk: float) -> str | None:
+    """The warning for Wi-Fi scans too sparse to place walks by (SPARSE_SCAN_SPACING_M), or None."""
+    sparse = np.isfinite(spacing_m) and spacing_m > SPARSE_SCAN_SPACING_M
+    few = np.isfinite(per_walk) and per_walk < SPARSE_SCANS_PER_WALK
+    if not (sparse or few):
+        return None
+    return (f"Wi-Fi scans are sparse: a median {spacing_m:.1f} m of walking apart and {per_walk:.0f} per walk "
+            f"(placement works best with scans at most {SPARSE_SCAN_SPACING_M:g} m apart and at least "
+            f"{SPARSE_SCANS_PER_WALK} per walk); expect fewer walks linked, and placed less well. Record with "
+            "Android's Wi-Fi scan throttling off (developer options) and in longer walks")
 
 
 def is_parallel(rel: np.ndarray) -> np.ndarray:
