@@ -160,7 +160,9 @@ def _apply(r: np.ndarray, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
 def _fit_se2(src: np.ndarray, dst: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
     ok = rows[np.isfinite(src[rows]).all(axis=1) & np.isfinite(dst[rows]).all(axis=1)]
     if len(ok) < 2:
-        raise InputError("SE(2) gauge needs at least 2 map nodes with reference positions")
+        raise InputError(f"cannot align the map to score it: the map's walks have {len(ok)} node(s) with a "
+                         "reference position (truth or fixes) and a rigid fit needs 2; too few walks were linked "
+                         "into the map, or they carry no fixes")
     r, t = align_se2(src[ok], dst[ok])
     res = np.hypot(*(_apply(r, t, src[ok]) - dst[ok]).T)
     info = {"rotation_deg": float(np.degrees(np.arctan2(r[1, 0], r[0, 0]))),
