@@ -238,3 +238,13 @@ def test_on_simulated_tiny_venue():
     s, b = j["maps"]["surveyed"]["knn"], j["maps"]["built"]["knn"]
     assert s["median"] == pytest.approx(b["median"], abs=1e-6)
     assert s["median"] < j["maps"]["raw"]["knn"]["median"]
+
+
+def test_a_map_with_no_reference_positions_cannot_be_aligned_and_says_why():
+    # fixes only on the test walk: the map walks carry nothing a rigid fit could use
+    ds = make_dataset()
+    ds.truth_poses = None
+    ds.fixes = ds.fixes[ds.fixes["walk_id"] == "w2"]
+    built = ds.poses[["x_m", "y_m"]].to_numpy()
+    with pytest.raises(InputError, match="cannot align the map to score it: the map's walks have 0 node"):
+        evaluate(ds, _fp(ds), built, CFG, ["w2"], "se2")
