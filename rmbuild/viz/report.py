@@ -51,6 +51,8 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("optimize", "factors.odometry", "odometry factors"),
     ("optimize", "factors.vicinity", "vicinity factors"),
     ("optimize", "linked_walks", "walks linked into the map"),
+    ("optimize", "vicinity.scan_spacing_m", "Wi-Fi scans: median metres walked between two of a walk's scans"),
+    ("optimize", "vicinity.scans_per_walk", "Wi-Fi scans per walk (median)"),
     ("optimize", "vicinity.rss_exponent", "fingerprints compared as powed RSS, exponent (1 = dBm as read)"),
     ("optimize", "vicinity.rf_model.threshold_db", "RF model: RSS distance where near and far are equally likely"),
     ("optimize", "components", "connected components"),
