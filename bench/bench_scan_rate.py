@@ -114,6 +114,7 @@ def run_policy(policy: str, floors: list[str], root: Path, scratch: Path) -> lis
             data = scratch / "data" / policy
             kept, total = thin_floor(root / rel, data / rel, policy, fmt)
         r = br.measure_floor(name, data, scratch / policy)
+        r.pop("per_walk", None)  # the per-walk table stays in the workspace: 24 runs of it would swamp the file
         rows.append({"policy": policy, "scans_kept": kept, "scans": total, **r})
     return rows
 

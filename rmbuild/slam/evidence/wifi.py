@@ -51,9 +51,9 @@ ACROSS_TOL = 0.02
 HEADING_MOTION_MAX_DEG = 20.0
 # Scans sparser than this along the walks (median metres walked between consecutive scans of a walk), or
 # fewer per walk than SPARSE_SCANS_PER_WALK, get a warning. With the real floors' scans thinned (docs/
-# optimize.md, "Scan rate") MS ILC site1/F1 linked 88 of 106 walks with its own scans (2.6 m apart, 14 per
+# optimize.md, "Scan rate") MS ILC site1/F1 linked 88 of 106 walks with its own scans (2.7 m apart, 14 per
 # walk), 41 with one scan per 5 s (6.9 m, 5 per walk), 19 with Android 9's four per two minutes (2.8 m,
-# 4 per walk); IPIN 2023 -2 (2.1 m, 34 per walk) kept 28 of 28 at 6.1 m, 14 per walk, and 20 at 9.9 m.
+# 4 per walk); IPIN 2023 -2 (2.0 m, 34 per walk) linked 28 of 28, 26 at 6.1 m and 14 per walk, 20 at 9.9 m.
 SPARSE_SCAN_SPACING_M = 4.0
 SPARSE_SCANS_PER_WALK = 8
 
@@ -271,7 +271,8 @@ def _rounded(v: float) -> float | None:
 
 
 def sparse_scans_warning(spacing_m: float, per_walk: float) -> str | None:
-    """The warning for Wi-Fi scans too sparse to place walks by (SPARSE_SCAN_SPACING_M), or None."""
+    """The warning for Wi-Fi scans too sparse to place walks by (SPARSE_SCAN_SPACING_M, SPARSE_SCANS_PER_WALK),
+    or None."""
     sparse = np.isfinite(spacing_m) and spacing_m > SPARSE_SCAN_SPACING_M
     few = np.isfinite(per_walk) and per_walk < SPARSE_SCANS_PER_WALK
     if not (sparse or few):
