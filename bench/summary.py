@@ -164,7 +164,8 @@ def write_summary(results: Path = RESULTS) -> Path:
              "with other jobs: compare ratios measured in one run (each benchmark says how it repeats them).", ""]
     lines += summary_lines(results)
     lines += ["", "Localizer accuracy per test bed: `localizers.md`; real floors: `real_after.md` (the current code; "
-              "`real.md` is the code before the back end was rebuilt).", ""]
+              "`real.md` is the code before the back end was rebuilt); the real floors with fewer Wi-Fi scans: "
+              "`scan_rate.md`.", ""]
     p = results / "SUMMARY.md"
     p.write_text("\n".join(lines))
     return p
