@@ -263,11 +263,7 @@ class WifiSource(EvidenceSource):
                 "device_offsets_db": {d: round(v, 2) for d, v in self.compared.offsets_db.items()},
                 "rss_exponent": self.compared.beta,
                 "rss_exponent_auc": {str(b): round(a, 4) for b, a in self.compared.auc.items()},
-                "scan_spacing_m": _rounded(self.density[0]), "scans_per_walk": _rounded(self.density[1])}
-
-
-def _rounded(v: float) -> float | None:
-    return round(v, 2) if np.isfinite(v) else None
+                "scan_spacing_m": round(self.density[0], 2), "scans_per_walk": round(self.density[1], 2)}
 
 
 def sparse_scans_warning(spacing_m: float, per_walk: float) -> str | None:
