@@ -48,7 +48,7 @@ def _scenario(preset: str, test_device, n_test: int | None, cell_m: float, seed:
     from rmbuild.config.evaluate import EvaluateConfig
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import simulate
 
@@ -147,7 +147,7 @@ def fit_study(draws: int = 8) -> dict:
 def read_real(folder: Path, fmt: str):
     """A real data set read with rmbuild's own reader and ingest (default [pdr] and [ingest] config)."""
     from rmbuild.config import IngestConfig, PdrConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats import choose_reader, expand_inputs
 
     files = expand_inputs([folder])

@@ -69,7 +69,7 @@ def _subset(ds, fp, target_poses: int):
 
 def _load(preset: str, seed: int):
     from rmbuild.config import IngestConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import preset_config, simulate
 

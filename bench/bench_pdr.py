@@ -32,7 +32,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.config.simulate import CARRY_MODES
 from rmbuild.geometry import wrap as wrap_angle
-from rmbuild.ingest_core import derive_poses
+from rmbuild.ingest.core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader
 from rmbuild.pdr import run_pdr

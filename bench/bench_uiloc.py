@@ -26,7 +26,7 @@ def _case(n_long: int, n_short: int):
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
     from rmbuild.evaluate.localization import query_reference_xy, split_walks
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.localize.base import Query
     from rmbuild.synthetic import simulate

@@ -14,7 +14,7 @@ from conftest import make_input_tables, write_tables
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.ingest_core import build_dataset
+from rmbuild.ingest.core import build_dataset
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
 from rmbuild.io.formats.rmbuild_schema import RmbuildSchemaReader
@@ -282,7 +282,7 @@ def test_real_ipin_logfiles_have_six_beacons(shared_datasets: Path):
 def test_real_ilc_site_split_keeps_ble_per_floor(shared_datasets: Path, tmp_path):
     site = shared_datasets / "msft-ilc20" / "data" / "site2"
     files = [f for fl in ("F4", "B1") for f in sorted((site / fl / "path_data_files").glob("*.txt.gz"))[:3]]
-    from rmbuild.ingest_floors import split_floors
+    from rmbuild.ingest.floors import split_floors
 
     raw = MsftIlcReader().read(files, IngestConfig())
     floors = split_floors(raw)

@@ -48,7 +48,7 @@ def test_the_map_lands_in_the_plans_frame():
     from rmbuild.config import IngestConfig
     from rmbuild.config.optimize import OptimizeConfig
     from rmbuild.evaluate.trajectory import trajectory_metrics
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.slam import optimize
     from rmbuild.synthetic import preset_config, simulate

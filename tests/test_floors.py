@@ -17,7 +17,7 @@ from conftest import SHARED_DATASETS, make_input_tables, write_tables
 from rmbuild.config import EvaluateConfig, IngestConfig, MapConfig, OptimizeConfig
 from rmbuild.config.simulate import preset_config
 from rmbuild.errors import InputError
-from rmbuild.ingest_floors import floor_level, split_floors
+from rmbuild.ingest.floors import floor_level, split_floors
 from rmbuild.io.formats import choose_reader, expand_inputs
 from rmbuild.io.workspace import building_floors, building_report_path
 from rmbuild.stages import evaluate, export_map, ingest, optimize, simulate

@@ -12,7 +12,7 @@ import pytest
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import MsftIlcConfig, PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.ingest_core import derive_poses
+from rmbuild.ingest.core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
 

@@ -14,7 +14,7 @@ from cli_util import run_cli
 from conftest import make_input_tables, write_tables
 
 from rmbuild.errors import InputError
-from rmbuild.ingest_checks import evidence_warnings, walk_rss_offsets
+from rmbuild.ingest.checks import evidence_warnings, walk_rss_offsets
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
 

@@ -170,7 +170,7 @@ def _synthetic(device):
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
     from rmbuild.evaluate.localization import reference_positions, split_walks
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.radiomap import build_radio_map
     from rmbuild.synthetic import simulate

@@ -17,7 +17,7 @@ Layout (one directory per project; every table is Parquet)::
       report.html, report/     `rmbuild report` (HTML page and its PNGs)
       view.rrd, <stage>.rrd    rerun recordings (`rmbuild view`, `--rerun`)
       build_state.json         `rmbuild build`: its inputs' fingerprint, each floor's configs and result
-                               (what a re-run may skip; rmbuild.stages.build_state)
+                               (what a re-run may skip; rmbuild.stages.building.state)
 
 A building (several floors) is a workspace whose manifest lists its floors; each floor is a whole
 single-floor workspace of the layout above, and the building keeps only the totals over its floors::

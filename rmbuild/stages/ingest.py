@@ -12,9 +12,9 @@ import numpy as np
 from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.floorplan import from_local_geojson, image_extent_m
-from rmbuild.ingest_checks import evidence_warnings
-from rmbuild.ingest_core import build_dataset
-from rmbuild.ingest_floors import floor_level, split_floors
+from rmbuild.ingest.checks import evidence_warnings
+from rmbuild.ingest.core import build_dataset
+from rmbuild.ingest.floors import floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floor_image import attach_image, check_extent, read_image, split_image
 from rmbuild.io.floorplan import check_plan_frame, read_user_plan

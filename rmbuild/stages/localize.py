@@ -215,7 +215,7 @@ def unpinned_origin_warning(pdr_cfg: PdrConfig, new: NewInput) -> str | None:
 
 def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConfig, pdr_cfg: PdrConfig) -> NewInput:
     """Read walks (any ingest format) or bare scans (rmbuild's schema without poses) into memory."""
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats import choose_reader, expand_inputs
     from rmbuild.io.scans import are_bare_scans, read_bare_scans
 

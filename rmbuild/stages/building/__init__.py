@@ -80,7 +80,7 @@ def building_report(workspace: str | Path, command: str, stage: str) -> dict:
             tot[k] = sum(v for v in vals if isinstance(v, int | float))
     tot["time_s"] = round(sum(_total_time(r) for r in reports.values()), 3)
     if stage == "optimize":
-        from rmbuild.stages.floor_frames import floor_frames
+        from rmbuild.stages.building.frames import floor_frames
 
         frames = floor_frames(workspace)
         if frames is not None:

@@ -17,7 +17,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.geometry import wrap
-from rmbuild.ingest_checks import scan_ids, walk_time_ordered
+from rmbuild.ingest.checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import (

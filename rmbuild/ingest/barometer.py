@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from rmbuild.ingest_checks import scan_ids
+from rmbuild.ingest.checks import scan_ids
 from rmbuild.io.formats.base import RawInput
 from rmbuild.localize.floor import floor_distances
 from rmbuild.pdr.baro import floor_changes
