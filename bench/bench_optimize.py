@@ -90,7 +90,7 @@ def _config(name: str):
     by random cross-walk pairs), full_graph (one node per step in the solve, for the chain reduction's
     time ratio)."""
     from rmbuild.config.optimize import OptimizeConfig, paper_config
-    from rmbuild.slam.testing import false_pairs
+    from tests.slam_venue import false_pairs
 
     if name == "paper":
         return paper_config(), None
