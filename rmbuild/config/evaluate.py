@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from rmbuild.config.base import bounded, check_ranges
-from rmbuild.config.localize import (
+from rmbuild.baselines.config import (
     BayesConfig,
     HistogramLocConfig,
     MllConfig,
@@ -18,6 +17,7 @@ from rmbuild.config.localize import (
     SsdConfig,
     SsrConfig,
 )
+from rmbuild.config.base import bounded, check_ranges
 
 
 @dataclass(frozen=True)

@@ -25,10 +25,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import BayesConfig, SmartLocatorConfig
+from rmbuild.baselines.bayes import NaiveBayesLocalizer
+from rmbuild.baselines.config import BayesConfig, SmartLocatorConfig
+from rmbuild.baselines.smoothing import frame_rotation, pdr_positions, rotate
 from rmbuild.localize.base import Query, as_reference, checked, sub_config
-from rmbuild.localize.bayes import NaiveBayesLocalizer
-from rmbuild.localize.smoothing import frame_rotation, pdr_positions, rotate
 
 
 class SmartLocator:

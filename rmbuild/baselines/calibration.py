@@ -24,7 +24,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import OfflineCalibrationConfig
+from rmbuild.baselines.config import OfflineCalibrationConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, checked, sub_config
 from rmbuild.radiomap.reference import ReferenceSet

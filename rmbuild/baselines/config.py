@@ -305,7 +305,7 @@ class HistogramLocConfig:
 @dataclass(frozen=True)
 class OfflineCalibrationConfig:
     """`offline_cal`: a localizer run on scans mapped back by a device model fitted offline (SLAC's
-    comparison case), φ_device = k ψ_map + b; see rmbuild.localize.calibration.fit_device_model."""
+    comparison case), φ_device = k ψ_map + b; see rmbuild.baselines.calibration.fit_device_model."""
 
     # 1; the test device's gain k against the map's device (1 = same device).
     k: float = bounded(1.0, 0.001, 100.0)
