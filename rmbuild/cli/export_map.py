@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, floor_option, stage_viewer, start, workspace_option
-from rmbuild.cli.view import rerun_option
+from rmbuild.cli.options import common_options, floor_option, rerun_option, stage_viewer, start, workspace_option
 
 
 @click.command("export-map")
