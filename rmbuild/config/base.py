@@ -341,9 +341,3 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
     return conv(cfg)
 
-
-def with_overrides(cfg: T, where: str = "option", **overrides: Any) -> T:
-    """A copy of ``cfg`` with top-level fields replaced, type-checked and validated like a file."""
-    data = to_dict(cfg)
-    data.update({k: v for k, v in overrides.items()})
-    return from_dict(type(cfg), data, where)

@@ -97,9 +97,6 @@ class RadioMap:
             )
         raise ValueError(f"unknown reference kind {kind!r}")
 
-    def cell_table(self) -> pd.DataFrame:
-        return self.cells.copy()
-
     def long_table(self) -> pd.DataFrame:
         """One row per (cell, detected AP) with :data:`LONG_COLUMNS` (the Parquet table)."""
         r, c = np.nonzero(~np.isnan(self.mean_dbm))

@@ -675,16 +675,6 @@ class RerunViewer:
             self.rec.log(f"{PLOTS}/eval/xi/{entity_part(localizer)}", self.rr.Scalars(float(xi)))
         self._has["eval"] = True
 
-    def log_scalar(self, path: str, timeline: str, index: int, value: float) -> None:
-        """Any scalar series under ``plots/<path>`` (for stage hooks without a dedicated method)."""
-        self.rec.set_time(timeline, sequence=int(index))
-        self.rec.log(f"{PLOTS}/{path}", self.rr.Scalars(float(value)))
-
-    def log_text(self, path: str, text: str) -> None:
-        """A markdown note (e.g. a stage's summary) at ``notes/<path>``."""
-        self.rec.log(f"notes/{path}", self.rr.TextDocument(text, media_type=self.rr.MediaType.MARKDOWN),
-                     static=True)
-
 
 def _move_into_place(src: Path, dst: Path) -> None:
     """Move ``src`` to ``dst`` so that ``dst`` is never half written (copy beside it, then rename); ``dst``
