@@ -146,12 +146,12 @@ def fit_study(draws: int = 8) -> dict:
 
 def read_real(folder: Path, fmt: str):
     """A real data set read with rmbuild's own reader and ingest (default [pdr] and [ingest] config)."""
-    from rmbuild.config import IngestConfig, PdrConfig
+    from rmbuild.config import IngestConfig
     from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats import choose_reader, expand_inputs
 
     files = expand_inputs([folder])
-    reader = choose_reader(files, fmt, PdrConfig())
+    reader = choose_reader(files, fmt)
     raw = reader.read(files, IngestConfig())
     ds, fp, summary = build_dataset(raw, IngestConfig(), source=reader.name)
     pdr = [n for n in summary.get("notes", []) if "PDR" in n or "pdr" in n]
@@ -181,13 +181,15 @@ def run_one(name: str, rm, q, qxy, calib=None, cfg=None) -> tuple[np.ndarray | N
         return None, {"n/a": "no step events"}
     reg_name = name
     if name.endswith("@paper"):
-        cfg = dataclasses.replace(cfg, hist=dataclasses.replace(cfg.hist, scoring="mark", smooth_db=0.0))
+        hist = dataclasses.replace(cfg.baselines.hist, scoring="mark", smooth_db=0.0)
+        cfg = dataclasses.replace(cfg, baselines=dataclasses.replace(cfg.baselines, hist=hist))
         reg_name = name.split("@")[0]
     if name.startswith("offline_cal"):
         if calib is None:
             return None, {"n/a": "no offline fit (same device)"}
         base = name.split(":")[1] if ":" in name else "knn"
-        cfg = dataclasses.replace(cfg, offline_cal=OfflineCalibrationConfig(calib[0], calib[1], base))
+        cal = OfflineCalibrationConfig(calib[0], calib[1], base)
+        cfg = dataclasses.replace(cfg, baselines=dataclasses.replace(cfg.baselines, offline_cal=cal))
         reg_name = "offline_cal"
     t0 = time.perf_counter()
     loc = make_localizer(reg_name, cfg).fit(rm)

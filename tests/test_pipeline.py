@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -173,6 +174,13 @@ def test_list_options_are_repeatable_and_comma_separated(tiny_ws: Path, tmp_path
     rep = json.loads(Workspace.open(tmp_path / "ws").report_path("evaluate").read_text())
     assert rep["test_walks"] == walks[:2]
     assert all(set(m) == {"knn", "nb"} for m in rep["maps"].values())
+    # a paper baseline runs from `evaluate --localizer`, configured by its [evaluate.baselines.<name>] table
+    (tmp_path / "nb.toml").write_text("[evaluate.baselines.nb]\nk = 1\n")
+    r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "-q", "--localizer", "nb",
+                "--config", tmp_path / "nb.toml")
+    assert r.code == 0, r.err
+    written = tomllib.loads(Workspace.open(tmp_path / "ws").read_config_text("evaluate") or "")
+    assert written["evaluate"]["baselines"]["nb"]["k"] == 1
     r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "--localizer", "knn,magic")
     assert r.code == 2 and "'magic' is not one of" in r.err and len(r.err.strip().splitlines()) == 1
 

@@ -162,7 +162,7 @@ def calibrate_query(query: Query, k: float, b: float, device_model: str = "devic
 
 
 class OfflineCalibrated:
-    """A localizer run on scans mapped back by a device model fitted offline (``[evaluate.offline_cal]``)."""
+    """A localizer run on scans mapped back by a device model fitted offline (``[evaluate.baselines.offline_cal]``)."""
 
     name: ClassVar[str] = "offline_cal"
 

@@ -1,5 +1,6 @@
-"""Config of the localizers beyond kNN: SLAC, MLL, PFL, SSD, SSR, naive Bayes, SmartLocator's fusion, the
-RSS-histogram matchers, Kalman smoothing and the offline device calibration (docs/localizers.md).
+"""Settings of the paper baselines (TOML ``[evaluate.baselines.<name>]``): SLAC, MLL, PFL, SSD, SSR, naive
+Bayes, SmartLocator's fusion, the RSS-histogram matchers, Kalman smoothing and the offline device
+calibration (docs/baselines.md). ``rmbuild config --all`` prints them; ``rmbuild config`` leaves them out.
 
 Every number the papers give is a field with its paper default (docs/localizers.md cites them): SLAC (He,
 Chan, Yu, Liu, UbiComp 2015) and its baselines MLL, PFL, SSD, SSR and offline linear fitting; SmartLocator
@@ -11,7 +12,7 @@ heading corrections). Fields the papers leave open carry our default and say so.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 from rmbuild.config.base import bounded, check_ranges
@@ -318,3 +319,27 @@ class OfflineCalibrationConfig:
         check_ranges(self, "offline_cal.")
         if self.base == "offline_cal":
             raise ValueError("offline_cal.base must name another localizer")
+
+
+@dataclass(frozen=True)
+class BaselinesConfig:
+    """Every baseline's settings, one table each (``[evaluate.baselines.slac]``, ...)."""
+
+    # SLAC (He et al. 2015) and its comparison cases MLL, PFL, SSD, SSR and offline linear fitting
+    slac: SlacConfig = field(default_factory=SlacConfig)
+    mll: MllConfig = field(default_factory=MllConfig)
+    pfl: PflConfig = field(default_factory=PflConfig)
+    ssd: SsdConfig = field(default_factory=SsdConfig)
+    ssr: SsrConfig = field(default_factory=SsrConfig)
+    offline_cal: OfflineCalibrationConfig = field(default_factory=OfflineCalibrationConfig)
+    # SmartLocator (Becker et al. 2015): naive Bayes and its fusion with PDR
+    nb: BayesConfig = field(default_factory=BayesConfig)
+    smartloc: SmartLocatorConfig = field(default_factory=SmartLocatorConfig)
+    # the subway-station paper: RSS histograms and the Kalman post-filter of the *_kf variants
+    hist: HistogramLocConfig = field(default_factory=HistogramLocConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+
+    def validate(self) -> None:
+        for sub in (self.slac, self.mll, self.pfl, self.ssd, self.ssr, self.offline_cal, self.nb, self.smartloc,
+                    self.hist, self.smoothing):
+            sub.validate()

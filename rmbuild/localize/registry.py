@@ -1,4 +1,5 @@
-"""The localizer registry: name -> implementing class and a one-line description.
+"""The localizer registry: name -> implementing class and a one-line description; the localizers rmbuild
+offers (kNN, distance-weighted kNN) apart from the paper baselines of :mod:`rmbuild.baselines`.
 
 No heavy imports here (the CLI builds its ``--localizer`` choices and help from it); classes are imported
 only when :func:`rmbuild.localize.base.localizer_class` asks for one. Each class provides
@@ -7,10 +8,14 @@ only when :func:`rmbuild.localize.base.localizer_class` asks for one. Each class
 
 from __future__ import annotations
 
-#: name -> ("module:Class", what it is). Explicit: a new localizer is one line here.
-REGISTRY: dict[str, tuple[str, str]] = {
+#: name -> ("module:Class", what it is): the localizers rmbuild offers. Explicit: a new one is one line here.
+LOCALIZERS_OFFERED: dict[str, tuple[str, str]] = {
     "knn": ("rmbuild.localize.knn:KnnLocalizer", "FL / kNN: mean of the K RPs nearest in RSS space"),
     "wknn": ("rmbuild.localize.knn:WeightedKnnLocalizer", "distance-weighted kNN"),
+}
+
+#: the paper baselines (:mod:`rmbuild.baselines`), runnable by name beside them (docs/baselines.md)
+BASELINES: dict[str, tuple[str, str]] = {
     "uiloc": ("rmbuild.baselines.uiloc:UilocLocalizer",
               "UILoc: kNN and least-squares multilateration fused by exp(-distance) weights"),
     "nb": ("rmbuild.baselines.bayes:NaiveBayesLocalizer", "naive Bayes, Gaussian kernel per AP (SmartLocator)"),
@@ -33,6 +38,9 @@ REGISTRY: dict[str, tuple[str, str]] = {
     "slac_kf": ("rmbuild.baselines.smoothing:SlacKalman", "SLAC, Kalman-smoothed with PDR"),
 }
 
+#: every name ``--localizer`` takes
+REGISTRY: dict[str, tuple[str, str]] = {**LOCALIZERS_OFFERED, **BASELINES}
+
 
 def localizer_names() -> list[str]:
     """Registered names, in registry order."""
@@ -40,5 +48,6 @@ def localizer_names() -> list[str]:
 
 
 def describe() -> str:
-    """"name (what it is), ..." for help texts."""
-    return "; ".join(f"{n}: {d}" for n, (_, d) in REGISTRY.items())
+    """The offered localizers with what they are, then the baselines' names, for help texts."""
+    offered = "; ".join(f"{n}: {d}" for n, (_, d) in LOCALIZERS_OFFERED.items())
+    return f"{offered}; paper baselines (docs/baselines.md): {', '.join(BASELINES)}"

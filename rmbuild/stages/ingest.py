@@ -84,7 +84,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
          force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None,
          image: tuple[bytes, list[float] | None] | None) -> dict:
     t0 = time.perf_counter()
-    reader = choose_reader(files, fmt, pdr_cfg)
+    reader = choose_reader(files, fmt)
     progress.phase(f"reading {reader.name}", len(files), "files")
     counted = [0]
 
@@ -96,7 +96,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     raw = reader.read(files, cfg)
     progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
-    pdr_cfg = pinned_origin(pdr_cfg, raw)
+    cfg = pinned_origin(cfg, raw)
     floors = split_floors(raw)
     if floors is not None:
         if image is not None:
@@ -125,14 +125,14 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     return summary
 
 
-def pinned_origin(pdr_cfg: PdrConfig, raw: RawInput) -> PdrConfig:
-    """``pdr_cfg`` with the WGS84 origin the reader chose for the fixes' local frame (IPIN's first fix) made
+def pinned_origin(cfg: IngestConfig, raw: RawInput) -> IngestConfig:
+    """``cfg`` with the WGS84 origin the reader chose for the fixes' local frame (IPIN's first fix) made
     explicit, so that the config written beside the data reads later input (``ingest --append``,
     ``localize``) in the same frame; unchanged when the reader chose none."""
     if raw.enu_origin is None:
-        return pdr_cfg
+        return cfg
     lat, lon = raw.enu_origin
-    return replace(pdr_cfg, ipin=replace(pdr_cfg.ipin, origin_lat_deg=lat, origin_lon_deg=lon))
+    return replace(cfg, ipin=replace(cfg.ipin, origin_lat_deg=lat, origin_lon_deg=lon))
 
 
 def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan: dict | None,

@@ -90,7 +90,7 @@ def run(
         icfg, pcfg = ingest_configs(ws)
         new = read_input(inputs, fmt, icfg, pcfg)
         ds = new.dataset
-        unpinned = unpinned_origin_warning(pcfg, new)
+        unpinned = unpinned_origin_warning(icfg, new)
         if hold_out:
             progress.phase("building the map of the other walks")
             rm, hold_note = held_out_map(ws, ds)
@@ -201,16 +201,16 @@ def ingest_configs(ws: Workspace) -> tuple[IngestConfig, PdrConfig]:
     return load_stage_config_text("ingest", text, where), load_stage_config_text("pdr", text, where)
 
 
-def unpinned_origin_warning(pdr_cfg: PdrConfig, new: NewInput) -> str | None:
+def unpinned_origin_warning(ingest_cfg: IngestConfig, new: NewInput) -> str | None:
     """A warning when new IPIN logfiles with fixes are read against a workspace that does not record the
     WGS84 origin of its own fixes' frame (ingested before ingest wrote it into the config): the new fixes
     then get a frame of their own."""
     fixes = new.dataset.fixes
-    if new.reader != "ipin" or pdr_cfg.ipin.origin_lat_deg is not None or fixes is None or not len(fixes):
+    if new.reader != "ipin" or ingest_cfg.ipin.origin_lat_deg is not None or fixes is None or not len(fixes):
         return None
     return ("the workspace does not record the WGS84 origin of its POSI fixes' frame (ingested before rmbuild "
             "wrote it into data/config.toml): the new fixes are put into a frame of their own; re-ingest the "
-            "workspace, or set pdr.ipin.origin_lat_deg / origin_lon_deg to the origin its ingest notes name")
+            "workspace, or set ingest.ipin.origin_lat_deg / origin_lon_deg to the origin its ingest notes name")
 
 
 def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConfig, pdr_cfg: PdrConfig) -> NewInput:
@@ -222,7 +222,7 @@ def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConf
     files = expand_inputs(inputs)
     if fmt in (None, "rmbuild") and are_bare_scans(files):
         return NewInput(read_bare_scans(files, ingest_cfg), "scans", "rmbuild", len(files))
-    reader = choose_reader(files, fmt, pdr_cfg)
+    reader = choose_reader(files, fmt)
     raw = reader.read(files, ingest_cfg)
     ds, _, _ = build_dataset(raw, ingest_cfg, source=reader.name, pdr_cfg=pdr_cfg)
     return NewInput(ds, "walks", reader.name, len(files))

@@ -39,7 +39,6 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import PdrConfig
 from rmbuild.pdr import ImuSignals
 
 
@@ -107,9 +106,7 @@ class Reader(ABC):
     name: ClassVar[str]
     description: ClassVar[str]
 
-    def __init__(self, options: PdrConfig | None = None) -> None:
-        """``options``: the ``[pdr]`` config (phone PDR and format specifics); defaults when None."""
-        self.options = options if options is not None else PdrConfig()
+    def __init__(self) -> None:
         #: called with each input file once it is read (progress); set by the caller, None: nobody counts
         self.on_file: Callable[[Path], None] | None = None
 
@@ -128,7 +125,8 @@ class Reader(ABC):
 
     @abstractmethod
     def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
-        """Read ``files`` into a :class:`RawInput`; raise InputError (file + line) on malformed input."""
+        """Read ``files`` into a :class:`RawInput`; raise InputError (file + line) on malformed input.
+        ``cfg``: the ``[ingest]`` config, whose ``[ingest.<format>]`` table holds this reader's options."""
 
 
 #: format name -> reader class; filled by :mod:`rmbuild.io.formats`
