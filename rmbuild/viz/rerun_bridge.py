@@ -412,7 +412,7 @@ class RerunViewer:
     def log_vicinity(self, pairs: pd.DataFrame, node_xy: np.ndarray, max_lines: int = MAX_VICINITY_LINES,
                      error_scale: float | None = None, seed: int = 0) -> int:
         """Vicinity factors as segments between their nodes' positions ``node_xy`` (n_nodes, 2), coloured
-        by ``final_error`` (green low -> red at ``error_scale``, default the 95th percentile), labelled with
+        by ``final_error`` (blue low -> red at ``error_scale``, default the 95th percentile), labelled with
         their kind (and "anisotropic" for along/across factors) and error.
 
         When there are more than ``max_lines`` pairs, the worst 20 % of the sample are the pairs with the
