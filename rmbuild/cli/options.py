@@ -18,8 +18,8 @@ def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
     f = click.option("-q", "--quiet", is_flag=True,
                      help="No progress, tables or summaries: only warnings and errors.")(f)
     f = click.option("--force", is_flag=True,
-                     help="Replace this stage's existing outputs (for ingest: the workspace) and an existing "
-                          "--rerun recording.")(f)
+                     help="Replace existing outputs (for ingest: the workspace); without it nothing is "
+                          "overwritten.")(f)
     f = click.option(
         "--config", "config_path", type=click.Path(dir_okay=False), default=None,
         help="TOML file with a table per stage ([ingest], [optimize], ...); unknown keys are errors.",
@@ -62,7 +62,8 @@ workspace_option = click.option(
 rerun_option = click.option(
     "--rerun", "rerun", default=None, is_flag=False, flag_value="auto", metavar="[spawn|serve|FILE.rrd]",
     help="Log to rerun while the stage runs: spawn the viewer, serve the web viewer, or save FILE.rrd "
-         "(alone: spawn with a display, else save WORKSPACE/<stage>.rrd).",
+         "(alone: spawn with a display, else save WORKSPACE/<stage>.rrd; an existing recording is replaced "
+         "only with --force).",
 )
 
 

@@ -112,6 +112,9 @@ def run(
         log.warning(w)
     progress.phase(f"localizing {len(query)} scans with {name}")
     res = localize_query(rm, query, name, cfg)
+    if (outside := _outside_warning(res)) is not None:
+        log.warning(outside)
+        warnings.append(outside)
     table = positions_table(query, res, to_map(ref) if to_map is not None else None)
     write_table(table, out, geo)
     report = {
@@ -121,6 +124,7 @@ def run(
         "scans_without_map_aps": int((res.n_aps == 0).sum()),
         "unlocalized": int((~np.isfinite(res.xy).all(axis=1)).sum()),
         "uncertainty_m_median": _median(res.uncertainty_m), "localizer_summary": res.summary,
+        "outside_map": {"scans": int(res.outside_map.sum()), "threshold_db": res.outside_db},
         "truth": {"present": has_truth, "frame": frame_note if has_truth else None},
         "errors": error_stats(table["error_m"].to_numpy()) if "error_m" in table else None,
         "warnings": warnings, "time_s": round(time.perf_counter() - t0, 3),
@@ -169,6 +173,19 @@ def _overlap_warning(ds: Dataset, rm: RadioMap) -> list[str]:
         return []
     return [f"{len(both)} input walk(s) are among the map's own walks ({', '.join(both[:3])}"
             f"{' ...' if len(both) > 3 else ''}): their scans are in the map, so their errors are optimistic"]
+
+
+def _outside_warning(res) -> str | None:
+    """A warning when scans match the map worse than its own scans match a neighbouring cell: they were
+    probably taken where the map has no walks, and their positions are guesses inside the map."""
+    n = int(res.outside_map.sum())
+    if not n:
+        return None
+    located = int(np.isfinite(res.xy).all(axis=1).sum())
+    return (f"{n} of {located} scans match the map worse than 99% of the map's own scans match a neighbouring "
+            f"cell (nearest fingerprint more than {res.outside_db:.1f} dB away): they were probably taken outside "
+            "the area the map covers; their positions are guesses inside the map and their uncertainty_m "
+            "understates the error (output column outside_map)")
 
 
 def _median(a: np.ndarray) -> float | None:
