@@ -162,7 +162,26 @@ def test_a_device_offset_is_reported_and_plain_walks_are_not(tmp_path: Path) -> 
         warnings = evidence_warnings(ds2)
         assert len(warnings) == 1 and warnings[0].startswith(f"walk {wid!r} reads {off[wid]:+.1f} dB"), warnings
         assert "slac localizer calibrates devices" in warnings[0]
+    # several offset walks: one warning naming each with its offset, largest first
+    ids = [str(w) for w in ds.walks["walk_id"].iloc[1:3]]
+    ds3 = Workspace.open(tmp_path / "ws").read_dataset()
+    for wid, shift in zip(ids, (10.0, -16.0), strict=True):
+        ds3.wifi.loc[ds3.wifi["walk_id"] == wid, "rssi_dbm"] += shift
+    warnings = evidence_warnings(ds3)
+    assert len(warnings) == 1 and warnings[0].startswith("2 walks read 6 dB or more"), warnings
+    assert warnings[0].index(repr(ids[1])) < warnings[0].index(repr(ids[0]))  # the larger offset first
+    assert "they may stay unlinked" in warnings[0]
     assert isinstance(SimulateConfig(), SimulateConfig)
+
+
+def test_many_offset_walks_are_one_short_warning() -> None:
+    from rmbuild.ingest.checks import NAMED_OFFSETS, offset_warning
+
+    offsets = {f"walk{i:02d}": (-1) ** i * (6.0 + i) for i in range(11)}
+    (text,) = offset_warning(offsets)
+    assert text.count(" dB,") == NAMED_OFFSETS - 1 and "'walk10' +16.0 dB" in text
+    assert f"and {11 - NAMED_OFFSETS} more" in text and "'walk00'" not in text and len(text) < 450
+    assert offset_warning({}) == []
 
 
 def test_a_three_step_walk_is_reported(tmp_path: Path, capsys) -> None:

@@ -62,12 +62,30 @@ class _Codes:
 def evidence_warnings(ds: Dataset) -> list[str]:
     """Warnings about duplicated walks, very short walks and device offsets (empty when all is plausible)."""
     codes = _Codes.of(ds)
-    return duplicate_walks(ds, codes) + short_walks(ds, codes) + [
-        f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
-        "the optimizer removes offsets per device (device_id), not per walk, so it may stay unlinked; the slac "
-        "localizer calibrates devices when localizing"
-        for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB
-    ]
+    offsets = {w: off for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB}
+    return duplicate_walks(ds, codes) + short_walks(ds, codes) + offset_warning(offsets)
+
+
+#: walks named with their offset in the device-offset warning; past this, their number
+NAMED_OFFSETS = 8
+
+
+def offset_warning(offsets: dict[str, float]) -> list[str]:
+    """One warning for every walk reading :data:`OFFSET_WARN_DB` or more off the others (walk -> dB),
+    largest offsets first; [] when there is none."""
+    if not offsets:
+        return []
+    ranked = sorted(offsets.items(), key=lambda kv: -abs(kv[1]))
+    shown = ", ".join(f"{w!r} {off:+.1f} dB" for w, off in ranked[:NAMED_OFFSETS])
+    more = f" and {len(ranked) - NAMED_OFFSETS} more" if len(ranked) > NAMED_OFFSETS else ""
+    tail = ("the optimizer removes offsets per device (device_id), not per walk, so {} may stay unlinked; the slac "
+            "localizer calibrates devices when localizing")
+    if len(ranked) == 1:
+        w, off = ranked[0]
+        return [f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
+                + tail.format("it")]
+    return [f"{len(ranked)} walks read {OFFSET_WARN_DB:g} dB or more against the other walks at the same places "
+            f"(a device offset?): {shown}{more}; " + tail.format("they")]
 
 
 def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series, walk: tuple[np.ndarray, pd.Index],

@@ -8,7 +8,8 @@ Layout (one directory per project; every table is Parquet)::
                                truth/
       optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv;
                                tum/truth/*.txt: the true paths, same file names, when the input had them)
-      map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures
+      map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures,
+                               evo/: the map's walks and their truth as TUM files on one clock
       evaluate/                per-scan errors, CDF plot
       <stage dir>/report.json  the stage's machine-readable summary
       <stage dir>/config.toml  the resolved config the stage ran with
@@ -128,6 +129,11 @@ ARTEFACTS: dict[str, str] = {
     "map.ble_wide_csv_aps": "map/radiomap_ble_uji_aps.csv",
     "map.ble_sidecar": "map/radiomap_ble.json",
     "map.coverage_png": "map/coverage.png",
+    "map.evo_map": "map/evo/map.txt",
+    "map.evo_truth": "map/evo/truth.txt",
+    "map.evo_waypoints": "map/evo/waypoints.txt",
+    "map.evo_map_at_waypoints": "map/evo/map_at_waypoints.txt",
+    "map.evo_clock": "map/evo/clock.csv",
     "map.heatmaps_png": "map/heatmaps.png",
     # evaluate
     "evaluate.errors": "evaluate/errors.parquet",
