@@ -39,6 +39,7 @@ run: $(STAMP)
 	@echo "  workspace:                              $(RUN_DIR)/workspace"
 	@echo "  stage reports:                          $(RUN_DIR)/workspace/*/report.json"
 	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
+	@echo "  the whole map for evo (one TUM file):   $(RUN_DIR)/workspace/map/evo/"
 	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
 	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
 
@@ -53,8 +54,9 @@ run-real: $(STAMP)
 	@echo "results:"
 	@echo "  input (real traces + floor plan, MIT):  $(REAL_DATA)"
 	@echo "  workspace:                              $(REAL_DIR)/workspace"
-	@echo "  stage reports:                          $(REAL_DIR)/workspace/reports/*.json"
-	@echo "  aligned walks (TUM files for evo):      $(REAL_DIR)/workspace/optimize/"
+	@echo "  stage reports:                          $(REAL_DIR)/workspace/*/report.json"
+	@echo "  aligned walks (TUM files for evo):      $(REAL_DIR)/workspace/optimize/tum/"
+	@echo "  the whole map for evo (one TUM file):   $(REAL_DIR)/workspace/map/evo/"
 	@echo "  radio map:                              $(REAL_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(REAL_DIR)/workspace/report.html"
 
