@@ -101,7 +101,8 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_users": "data/truth/users.parquet",
     "data.truth_landmarks": "data/truth/landmarks.parquet",
     "data.truth_beacons": "data/truth/beacons.parquet",
-    "data.floorplan": "data/floorplan.geojson",
+    # local metres: GeoJSON-shaped but not RFC 7946 GeoJSON (whose coordinates are WGS84 lon/lat), hence .json
+    "data.floorplan": "data/floorplan.local.json",
     "data.floor_image": "data/floor_image.png",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
@@ -145,6 +146,8 @@ ARTEFACTS: dict[str, str] = {
     "view.rrd": "view.rrd",
     "build.state": "build_state.json",
 }
+#: artefacts an earlier rmbuild wrote under another name, read there when the new name is absent
+LEGACY_ARTEFACTS = {"data.floorplan": "data/floorplan.geojson"}
 for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.report"] = f"{_dir}/{REPORT}"
     ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
@@ -397,7 +400,11 @@ class Workspace:
             )
 
     def path(self, key: str) -> Path:
-        return self.root / ARTEFACTS[key]
+        p = self.root / ARTEFACTS[key]
+        old = LEGACY_ARTEFACTS.get(key)
+        if old is not None and not p.exists() and (self.root / old).exists():  # written by an earlier rmbuild
+            return self.root / old
+        return p
 
     def exists(self, key: str) -> bool:
         return self.path(key).exists()
@@ -448,7 +455,7 @@ class Workspace:
         except OSError as e:
             raise WorkspaceError(f"{p}: unreadable ({e.strerror})") from None
         if stage is not None:
-            self._verify(stage, ARTEFACTS[key], data)
+            self._verify(stage, p.relative_to(self.root).as_posix(), data)
         return data
 
     def _verify(self, stage: str, rel: str, data: bytes) -> None:
