@@ -225,7 +225,8 @@ def test_every_geojson_a_workspace_holds_is_rfc7946(tmp_path, capsys):
                  ["export-map", "-w", ws]):
         assert run_cli(capsys, *args, "-q").code == 0
     local = json.loads((ws / "data" / "floorplan.local.json").read_text())
-    assert local["frame"] == "local_m" and _rfc7946_problems(local)  # metres: rightly not named .geojson
+    assert local["frame"] == "local_m" and not list((ws / "data").glob("*.geojson"))  # metres: not .geojson
+    assert _rfc7946_problems({**local, "features": [{"geometry": {"coordinates": [[500.0, 300.0]]}}]})
     for p in ws.rglob("*.geojson"):
         assert _rfc7946_problems(json.loads(p.read_text())) == [], p
     # a workspace an earlier rmbuild wrote: the plan under its old name, recorded so in the ingest record
