@@ -221,7 +221,9 @@ def test_uji_csv_of_a_floor_carries_its_level(building: dict[str, Path]) -> None
     for f in ("F1", "F2"):
         csv = pd.read_csv(building["both"] / "floors" / f / "map" / "radiomap_uji.csv")
         assert (csv["FLOOR"] == levels[f]).all()
-    assert (pd.read_csv(building["F2"] / "map" / "radiomap_uji.csv")["FLOOR"] == 0).all()
+    # one numbering: the floor ingested alone (its input names it F2) is the same FLOOR as in its building
+    assert json.loads((building["F2"] / "data" / "report.json").read_text())["floor"] == "F2"
+    assert (pd.read_csv(building["F2"] / "map" / "radiomap_uji.csv")["FLOOR"] == levels["F2"]).all()
 
 
 def test_localize_on_a_building_takes_one_floor(building: dict[str, Path], tmp_path: Path,

@@ -66,6 +66,7 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     segments = _segments(raw, pf, walk_floor or {}, cuts or {})
     floors = list(dict.fromkeys(f for _, f, _ in segments))
     if len(floors) <= 1:
+        raw.floor_name = floors[0] if floors and floors[0] else None
         return None
     raw.transitions = _transitions(segments)
     return {f: _floor_input(raw, f, [(w, s) for w, ff, s in segments if ff == f]) for f in floors}

@@ -114,8 +114,7 @@ def read_set(db: str | Path, month: int, name: str) -> UjiSet:
         i = int(np.argmax(stamp.isna()))
         raise InputError(f"not a YYYYMMDDhhmmssmmm time: {int(tms[i])}", f"{_file(d, name, 'tms')}:{i + 1}")
     t_s = (stamp - pd.Timestamp("1970-01-01")).total_seconds().to_numpy(dtype=np.float64)
-    width = max(3, len(str(rss.shape[1])))
-    bssids = np.array([f"WAP{j + 1:0{width}d}" for j in range(rss.shape[1])], dtype=object)
+    bssids = np.array([f"WAP{j + 1:03d}" for j in range(rss.shape[1])], dtype=object)
     return UjiSet(month, name, rss32, crd[:, :2].copy(), crd[:, 2].astype(np.int64), t_s, ids.astype(np.int64),
                   bssids)
 

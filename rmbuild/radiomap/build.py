@@ -117,9 +117,9 @@ class RadioMap:
         })
 
     def wap_names(self) -> list[str]:
-        """UJIIndoorLoc-style column names WAP001.. for the map's APs, in ``bssids`` order."""
-        width = max(3, len(str(len(self.bssids))))
-        return [f"WAP{i + 1:0{width}d}" for i in range(len(self.bssids))]
+        """UJIIndoorLoc's column names for the map's APs, in ``bssids`` order: WAP001 .. WAP999 with three digits
+        as in UJIIndoorLoc (its 520 APs are WAP001 .. WAP520), then WAP1000, WAP1001, ... for a map of more."""
+        return [f"WAP{i + 1:03d}" for i in range(len(self.bssids))]
 
     def wide_table(self, layout: str = "uji", floor: int = 0, uji_xy: np.ndarray | None = None) -> pd.DataFrame:
         """One row per cell, one column per AP, +100 = not detected (UJIIndoorLoc's convention).

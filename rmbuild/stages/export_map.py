@@ -70,7 +70,7 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
     progress.phase("writing map")
     georef, plan_name, _, _ = find_georef(ws, rm.frame)
-    floor = level_of_floor(ws.root) or 0
+    floor = floor_number(ws)
     with ws.writing("map") as w:
         _write_wifi(w, ws, rm, cfg, info, walls, georef, plan_name, floor)
         ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
@@ -102,6 +102,18 @@ def _positions(ws: Workspace, ds, cfg: MapConfig, anchors_path: str | Path | Non
             xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), anchors)
             info.update(extra)
     return xy, info
+
+
+def floor_number(ws: Workspace) -> int:
+    """The FLOOR the map's UJIIndoorLoc CSV gives its cells: the floor's level (0 the ground floor, -1 the
+    first basement) from its name, in a building and alone alike; 0 when the name does not say."""
+    from rmbuild.ingest.floors import floor_level
+
+    level = level_of_floor(ws.root)
+    if level is None:
+        name = (ws.read_report("ingest") or {}).get("floor")
+        level = floor_level(name) if isinstance(name, str) else None
+    return level or 0
 
 
 def _write_evo(w: StageWriter, ws: Workspace, ds, xy: np.ndarray, info: dict, frame: str) -> dict:

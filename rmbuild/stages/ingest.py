@@ -113,6 +113,8 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
+    if raw.floor_name:  # the one floor the input names: its level numbers the floor as in a building
+        summary["floor"] = raw.floor_name
     progress.phase("writing workspace")
     with Workspace.create(workspace, force=force) as w:
         _write(w, ds, fp, plan, cfg, pdr_cfg, reader.name != "rmbuild" or bool(raw.imu))

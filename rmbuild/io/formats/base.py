@@ -93,6 +93,8 @@ class RawInput:
     pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     #: where a walk was cut between floors (:mod:`rmbuild.ingest.floors`): walk, t_s, the segments either side
     transitions: list[dict] = field(default_factory=list)
+    #: the name of the one floor a single-floor input's floor columns give (set when they are consumed)
+    floor_name: str | None = None
     #: BLE beacon readings (the ``wifi`` columns; ``where`` key "ble"); None: the input has none
     ble: pd.DataFrame | None = None
     #: (lat, lon) degrees: the WGS84 origin the reader chose itself for the fixes' local frame; ingest writes
