@@ -9,7 +9,7 @@ average out over repeated scans), and the weaker device's means near its detecti
 readings it happened to detect. Ordinary least squares of device on map then (a) shrinks ``k`` towards 0 by
 the map side's noise (regression dilution) and (b) flattens it further because the device's low end is
 truncated upwards. On the synthetic venue a (1.25, −6 dB) device came out as k = 0.68 ± 0.03, b = −42 ± 2 dB
-from 60 standing spots (bench/bench_localizers.py, eight draws; docs/localizers.md). The fit here is a
+from 60 standing spots (bench/bench_localizers.py, eight draws; docs/notes/localizers.md). The fit here is a
 Deming (errors-in-variables) regression with error-variance ratio ``k²`` (both devices see the same radio
 noise, the device scaled by k), iterated, on the pairs whose estimated true level lies at least
 :data:`FLOOR_MARGIN_DB` above both devices' detection floors (selected on the fit's latent value, not on

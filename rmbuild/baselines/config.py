@@ -2,7 +2,7 @@
 Bayes, SmartLocator's fusion, the RSS-histogram matchers, Kalman smoothing and the offline device
 calibration (docs/baselines.md). ``rmbuild config --all`` prints them; ``rmbuild config`` leaves them out.
 
-Every number the papers give is a field with its paper default (docs/localizers.md cites them): SLAC (He,
+Every number the papers give is a field with its paper default (docs/baselines.md cites them): SLAC (He,
 Chan, Yu, Liu, UbiComp 2015) and its baselines MLL, PFL, SSD, SSR and offline linear fitting; SmartLocator
 (Becker, Jäger, Süß, ICONS 2015: naive Bayes, auto-adaptive fusion); the subway-station Wi-Fi + PDR paper
 (RSS histograms, direction-aware fingerprints, Kalman smoothing); UILoc (Sensors 2018: particle step and
@@ -64,7 +64,7 @@ class SlacConfig:
     device_model: Literal["device", "calibration"] = "device"
     # Particle weight (eq. 22). "distance": He et al. 2015, walked vs. estimated window distance only;
     # "distance_signal": also the Gaussian likelihood of the scans given the weighted RPs (ours; makes
-    # [k, b] identifiable when the distance test alone is not, see docs/localizers.md).
+    # [k, b] identifiable when the distance test alone is not, see docs/notes/localizers.md).
     particle_weight: Literal["distance", "distance_signal"] = "distance_signal"
     # dB; per-AP noise std of the signal likelihood under particle_weight = "distance_signal" (ours).
     signal_sigma_db: float = bounded(4.0, 0.1, 100.0)
@@ -89,8 +89,8 @@ class SlacConfig:
     # After ξ <= η sqrt(Var δ): continue with P = 1 and fixed [k, b, α, β] (He et al. 2015). False: never.
     converge: bool = True
     # scans; the convergence test runs only once at least this many scans of the walk were seen (ours;
-    # with fewer, the particles collapse on little evidence and the test passes too early: measured on the
-    # synthetic venue, k stopped at 1.0-1.1 of 1.25 with 7). 0 = the window size M (He et al. 2015).
+    # with fewer, the particles collapse on little evidence and the test passes too early:
+    # docs/notes/localizers.md). 0 = the window size M (He et al. 2015).
     min_scans_to_converge: int = bounded(30, 0, 100000)
     # 1; projected-gradient iterations of the joint optimisation per window (warm-started).
     solver_iters: int = bounded(60, 1, 10000)

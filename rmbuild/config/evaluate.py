@@ -1,4 +1,5 @@
-"""Config of `rmbuild evaluate` and of the fingerprint localizers (docs/localizers.md)."""
+"""Config of `rmbuild evaluate` and of kNN (docs/localizers.md); the paper baselines' settings are
+:mod:`rmbuild.baselines.config` (docs/baselines.md)."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ from rmbuild.config.base import bounded, check_ranges
 @dataclass(frozen=True)
 class MsftIlcConfig:
     # s; a TYPE_WIFI row whose last-seen time is older than its scan time by more than this is a stale
-    # cache entry and is dropped (on the MS ILC floors 3 s drops 55-60 % of the rows).
+    # cache entry and is dropped (on the MS ILC floors 3 s drops about half of the rows).
     max_wifi_age_s: float = bounded(3.0, 0.0, 3600.0)
 
     def validate(self) -> None:

@@ -1,7 +1,7 @@
 """Config of phone PDR (``rmbuild/pdr``, TOML section ``[pdr]``): how the raw phone IMU of the Microsoft
 ILC 2.0 traces and IPIN / GetSensorData logfiles becomes per-step poses. The readers' own options are
 ``[ingest.msft_ilc]`` and ``[ingest.ipin]`` (:mod:`rmbuild.config.ingest`). The defaults were chosen on the
-Microsoft ILC 2.0 and IPIN 2023 walks and on synthetic carrying modes (docs/formats-real.md).
+Microsoft ILC 2.0 and IPIN 2023 walks and on synthetic carrying modes (docs/notes/formats-real.md).
 """
 
 from __future__ import annotations
@@ -28,13 +28,13 @@ class PdrConfig:
     # (yaw_abs_rad) is always the rotation vector's.
     heading_source: Literal["auto", "gyro", "rotation_vector"] = "auto"
     # rad; 1-sigma of the absolute yaw observation per Android accuracy flag 0 (unreliable), 1 (low),
-    # 2 (medium), 3 (high). Measured on ILC F1: walks agree to a median 6°, P90 17° (flag 3).
+    # 2 (medium), 3 (high) (how walks agree by flag: docs/notes/formats-real.md).
     yaw_sigma_by_accuracy_rad: tuple[float, float, float, float] = bounded((0.6, 0.45, 0.3, 0.15), 0.001, math.pi)
 
     # --- step length ---
     # m; step length of a walker whose steps swing the acceleration magnitude by 4 m/s² peak to valley
     # (rmbuild/pdr/length.py scales it by the gait signal; the optimizer refines one scale per walk).
-    # Chosen leave-one-out over the five ILC 2.0 floors and the two IPIN 2023 phones (docs/formats-real.md).
+    # Chosen leave-one-out on real phone walks (docs/notes/formats-real.md).
     step_length_m: float = bounded(0.645, 0.05, 3.0)
     # m; step lengths are clipped to this range (before the shortening of turning steps).
     min_step_m: float = bounded(0.3, 0.05, 3.0)

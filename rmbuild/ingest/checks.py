@@ -7,7 +7,7 @@
   phone reading 10 dB stronger): co-located scans are found without positions, by the strongest AP they
   hear and the agreement of their readings after removing a constant, and the walk's median difference to
   the other walks is its offset. The optimizer removes offsets per device (``device_id``: the phones'
-  offsets, docs/optimize.md step 1), not per walk, so such a walk of a device shared with others links poorly;
+  offsets, docs/notes/optimize.md step 1), not per walk, so such a walk of a device shared with others links poorly;
   the ``slac`` localizer calibrates devices (RSS = k·φ + b; He, Chan, Yu and Liu, "Calibration-Free
   Fusion of Step Counter and Wireless Fingerprints for Indoor Localization", UbiComp 2015) only when
   localizing.
@@ -29,7 +29,7 @@ from rmbuild.types import Dataset
 MIN_WALK_STEPS = 5
 #: dB; a walk whose readings are at least this much above or below the others' at the same places is
 #: reported (on the MS ILC floors site1/F1 and site2/F4 the walks' estimated offsets are within ±6 dB,
-#: 90 % within ±3.5 dB: docs/reliability.md)
+#: 90 % within ±3.5 dB: docs/notes/reliability.md)
 OFFSET_WARN_DB = 6.0
 #: scans compared for the device-offset check need this many APs in common
 MIN_SHARED_APS = 5

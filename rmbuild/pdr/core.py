@@ -17,7 +17,7 @@ from rmbuild.pdr.timebase import TimeIssue, dropouts, main_block, resample, unif
 from rmbuild.pdr.yaw import relative_yaw
 
 #: m/s²; RMS of the band-passed acceleration magnitude below which a gait window is standing. Measured on
-#: the IPIN 2023 and ILC 2.0 phones: standing 0.02-0.1, the gentlest walking 0.5-1 (docs/formats-real.md)
+#: the IPIN 2023 and ILC 2.0 phones: standing 0.02-0.1, the gentlest walking 0.5-1 (docs/notes/formats-real.md)
 MIN_WALK_RMS_MPS2 = 0.25
 
 
@@ -53,7 +53,7 @@ def integrate_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: n
 
 #: step periods; each step's heading is the mean over [t - 1, t + 1] periods: one stride centred on the step
 #: (a swinging phone's yaw oscillates once per stride; a window of the step's own interval, or one stride
-#: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/formats-real.md)
+#: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/notes/formats-real.md)
 HEADING_WINDOW_PERIODS = (-1.0, 1.0)
 # deg; the absolute yaw is kept only while the phone's screen faces at most this far from up (held in front,
 # flat to pitched up: MS ILC traces 0-14°, IPIN 93 % of the samples; a phone at the ear, swinging in a hand
@@ -106,7 +106,7 @@ def _not_in_front(imu: ImuSignals, t0: float, w0: np.ndarray, w1: np.ndarray) ->
     than IN_FRONT_MAX_TILT_DEG away from up (the mean specific force over the step's interval). The
     absolute yaw is the azimuth of the phone's forward axis (:func:`rmbuild.pdr.heading.yaw_from_quat`),
     which is the walking direction only for a phone held in front; at the ear, in a swinging hand or in a
-    pocket it is off by 55-168° (docs/formats-real.md)."""
+    pocket it is off by 55-168° (docs/notes/formats-real.md)."""
     t = np.asarray(imu.t_acc_s, dtype=np.float64)
     a = np.asarray(imu.acc_mps2, dtype=np.float64)
     lo, hi = np.r_[t0, w0], np.r_[min(t0 + 1.0, float(t[-1])), w1]
