@@ -71,7 +71,7 @@ bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
 
 ## make bench-real: ingest -> optimize -> export-map -> evaluate on every real floor with ground truth
-## (RMBUILD_DATASETS, default ../shared/datasets); bench/results/real.json and real.md.
+## (RMBUILD_DATASETS: the folder holding the full MS ILC 2.0 and IPIN 2023 data sets); bench/results/real.json, real.md.
 ## Options through BENCH_REAL_ARGS, e.g. BENCH_REAL_ARGS="--floors F1,F4 --out real_after"
 bench-real: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.bench_real $(BENCH_REAL_ARGS)
