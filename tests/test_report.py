@@ -207,8 +207,9 @@ def test_report_shows_warnings_in_full_and_the_rf_caption_in_words(tmp_path: Pat
 def test_rf_caption_names_the_offsets_in_words() -> None:
     from rmbuild.viz.report import _rf_caption
 
-    text = _rf_caption({"device_offsets_db": {"PBCM10": 0.0, "SM-G": -6.25}})
-    assert "PBCM10 +0.0 dB, SM-G -6.2 dB" in text and "{" not in text
+    text = _rf_caption({"device_offsets_db": {"PBCM10": 0.0, "SM-G": -6.25, "A5": 5.3}})
+    assert "SM-G -6.2 dB, A5 +5.3 dB (the other 1 read alike)." in text and "{" not in text
+    assert "read alike: no RSS offset removed" in _rf_caption({"device_offsets_db": {"a": 0.0, "b": 0.0}})
 
 
 def test_heat_maps_show_one_access_point_per_radio() -> None:

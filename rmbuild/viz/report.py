@@ -279,9 +279,14 @@ def _rf_caption(rf: dict) -> str:
             "itself (pairs of scans of one walk, whose separation its dead reckoning knows); right: the powed "
             "exponent's choice (a β other than 1 only when it gains ≥ 0.03 AUC).")
     offsets = rf.get("device_offsets_db") or {}
-    if offsets:
-        shown = ", ".join(f"{dev} {float(v):+.1f} dB" for dev, v in offsets.items())
-        text += f" Each phone's RSS offset, removed before fingerprints are compared: {shown}."
+    moved = {dev: float(v) for dev, v in offsets.items() if abs(float(v)) >= 0.05}
+    if moved:
+        shown = ", ".join(f"{dev} {v:+.1f} dB" for dev, v in moved.items())
+        rest = len(offsets) - len(moved)
+        text += (f" Phones' RSS offsets against the reference phone, removed before fingerprints are compared: "
+                 f"{shown}" + (f" (the other {rest} read alike)." if rest else "."))
+    elif len(offsets) > 1:
+        text += f" The {len(offsets)} phones read alike: no RSS offset removed."
     return text
 
 
