@@ -244,7 +244,8 @@ def _unlinked_walks_are_marked(ws_dir: Path, walks: pd.DataFrame, capsys) -> Non
     assert dict(zip(tum["walk_id"], tum["linked"].astype(bool), strict=True)) == linked
     n_unlinked = sum(not v for v in linked.values())
     assert run_cli(capsys, "report", "-w", ws_dir).code == 0
-    assert f"{n_unlinked} walk(s) not linked to the map are not drawn" in (ws_dir / "report.html").read_text()
+    page = (ws_dir / "report.html").read_text()
+    assert f"the {n_unlinked} walk(s) optimize could not link" in page and "they are not drawn after" in page
     assert run_cli(capsys, "view", "-w", ws_dir, "--save", ws_dir / "v.rrd").code == 0
     ents = rrd_entities(ws_dir / "v.rrd")
     assert sum(e.startswith("/floor/optimized_unlinked/") and e.count("/") == 3 for e in ents) == n_unlinked

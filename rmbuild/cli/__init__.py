@@ -41,7 +41,7 @@ SUMMARIES = {
     "diff-map": "Report per AP what changed between two workspaces' radio maps.",
     "view": "Log a workspace to the rerun viewer.",
     "report": "Write a one-page HTML report of a workspace.",
-    "config": "Print every stage's settings as TOML (defaults, or a file resolved).",
+    "config": "Print the settings a user changes as TOML (--all: every setting).",
     "build": "The whole pipeline in one command; floors run as parallel (Dask) tasks.",
 }
 
