@@ -127,5 +127,5 @@ def _read_building(workspace: str | Path, command: str) -> dict:
     p = building_report_path(workspace, command)
     try:
         return json.loads(p.read_text()) if p.is_file() else {}
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # unreadable, malformed or absurdly nested: no figures
         return {}
