@@ -159,6 +159,22 @@ def test_anchor_just_before_the_first_step_fixes_the_first_pose():
         anchor_nodes(anchors.assign(walk_id=["w1", "x"]), walks, max_gap_s=1.0)
 
 
+def test_components_with_an_id_left_empty_keep_their_gauge():
+    """A floor plan that moves component 1 into the reference's leaves id 1 empty; the anchors (and the
+    gauge) must still see component 2 (an empty id once stopped optimize with an IndexError)."""
+    from types import SimpleNamespace
+
+    from rmbuild.config.optimize import AnchorConfig
+    from rmbuild.slam.evidence.anchors import AnchorSource
+    from rmbuild.slam.placement.model import Placement
+
+    comp = np.array([0, 0, 2, 2, 0])
+    placement = Placement(np.zeros((5, 3)), comp, 0, np.ones(5, bool), np.full(5, "", dtype=object))
+    walks = SimpleNamespace(keep=np.ones(5, bool))
+    AnchorSource(walks, None, AnchorConfig()).place(walks, placement, np.zeros((0, 3)))
+    assert placement.gauge_full == [0, 2] and placement.gauge_rotation_only == []
+
+
 def test_same_input_twice_gives_identical_poses(venue, result):
     """The back end is deterministic: RANSAC samplers are seeded, LM is deterministic."""
     ds, fp = venue

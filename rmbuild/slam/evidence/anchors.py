@@ -44,7 +44,7 @@ class AnchorSource(EvidenceSource):
         full, rot_only = [], []
         anchored = np.zeros(len(comp), bool)
         th_ref = 0.0  # rotation the anchors gave the reference component (the others follow it)
-        for c in range(int(comp.max()) + 1 if len(comp) else 0):
+        for c in np.unique(comp).tolist():  # a plan may have emptied some component ids
             walks_c = np.flatnonzero(comp == c)
             root = placement.reference if c == 0 else int(walks_c[0])
             m = comp[walks.walk_of[self.nodes]] == c if len(self.nodes) else np.zeros(0, bool)

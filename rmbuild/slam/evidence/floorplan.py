@@ -113,6 +113,7 @@ class FloorPlanSource(EvidenceSource):
             if c != 0:
                 placement.component[members] = 0
                 placement.method[members] = "floorplan"
+        _, placement.component = np.unique(placement.component, return_inverse=True)  # no id left empty
         self.fit = {**self.fit, "inside": round(fits[0]["inside"], 3), "turn_deg": fits[0]["turn_deg"],
                     "placed_components": int(sum(1 for c, f in fits.items() if c != 0 and _distinct(f)))}
         placement.frame = "floorplan"

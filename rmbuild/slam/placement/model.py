@@ -112,8 +112,3 @@ class Placement:
     @property
     def linked(self) -> np.ndarray:
         return self.component == 0
-
-    def roots(self) -> list[int]:
-        """The reference walk and the first walk of every other component."""
-        n_comp = int(self.component.max()) + 1 if len(self.component) else 0
-        return [self.reference] + [int(np.flatnonzero(self.component == c)[0]) for c in range(1, n_comp)]
