@@ -17,11 +17,12 @@ import pandas as pd
 
 from rmbuild.errors import InputError
 from rmbuild.io.formats.rmbuild_schema import check_columns, coerce, read_located
+from rmbuild.limits import MAX_COORD_M
 from rmbuild.types import Dataset
 
 ANCHOR_SCHEMA = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num"}
-#: m; |x| or |y| beyond this is no building-frame position (100 km: larger than any campus)
-MAX_ANCHOR_COORD_M = 1e5
+#: m; |x| or |y| beyond this is no building-frame position (the limit of every position)
+MAX_ANCHOR_COORD_M = MAX_COORD_M
 #: m; allowance for the anchors' own position error when two anchors of one walk are compared
 ANCHOR_SLACK_M = 5.0
 #: 1; allowance on the walked distance between two anchors (PDR step lengths err by well under 50 %)
