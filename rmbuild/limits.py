@@ -24,6 +24,8 @@ MAX_FINGERPRINT_CELLS = 20_000_000
 MAX_GUNZIP_BYTES = 128 * 2**20
 #: bytes of one trace file (MS ILC, IPIN), read whole: the largest published trace has 4 MB
 MAX_TRACE_BYTES = 64 * 2**20
+#: bytes of a floor plan file (a detailed mall floor's GeoJSON is a few MB)
+MAX_PLAN_BYTES = 64 * 2**20
 #: vertices of one floor plan: the MS ILC floors' plans have 1,000-6,000
 MAX_PLAN_VERTICES = 100_000
 #: m; the largest side of a floor plan's bounding box (the largest buildings are ~1 km long)

@@ -89,3 +89,118 @@ def test_a_million_distinct_bssids_is_a_clean_error_in_bounded_memory(tmp_path: 
     one_error(r, rf"{re.escape(str(folder / 'wifi.csv'))}: 800 poses with Wi-Fi readings of 1,000,000 distinct "
                  rf"BSSIDs: a fingerprint table of 800,000,000 cells, at most {limits.MAX_FINGERPRINT_CELLS:,}")
     assert r.peak_rss_mb < 1024, r.peak_rss_mb
+
+
+# ------------------------------------------------------------------------------ floor plans
+def _rect(x0: float, y0: float, x1: float, y1: float, **props) -> dict:
+    ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+    return {"type": "Feature", "properties": props, "geometry": {"type": "Polygon", "coordinates": [ring]}}
+
+
+def _local_plan(*features: dict) -> str:
+    import json
+
+    return json.dumps({"type": "FeatureCollection", "frame": "local_m", "features": list(features)})
+
+
+PLANS = {
+    # issue 40: RecursionError, GEOSException (NaN/Inf), OverflowError (1e308), MemoryError (1.16 TiB, 11.4 PiB)
+    "nested": ('{"type": "FeatureCollection", "frame": "local_m", "features": ' + "[" * 100_000 + "]" * 100_000
+               + "}", r"invalid JSON: nested deeper than 64 levels"),
+    "nan": (_local_plan(_rect(0, 0, 10, 10, type="floor")).replace("10, 10", "NaN, 10", 1),
+            r"invalid JSON: NaN is not a number JSON allows"),
+    "inf": (_local_plan(_rect(0, 0, 10, 10, type="floor")).replace("10, 10", "-Infinity, 10", 1),
+            r"invalid JSON: -Infinity is not a number"),
+    "e400": (_local_plan(_rect(0, 0, 10, 10, type="floor")).replace("10, 10", "1e400, 10", 1),
+             r"invalid JSON: number 1e400 is beyond the float range"),
+    "e308": (_local_plan(_rect(-1e308, -1e308, 1e308, 1e308, type="floor")),
+             r"vertex \(-1e\+308, -1e\+308\) lies more than 100000 m from the plan's origin"),
+    "e5": (_local_plan(_rect(-1e5, -1e5, 1e5, 1e5, type="floor")),
+           r"the plan spans 200000 x 200000 m: at most 2000 m on a side"),
+    "e7": (_local_plan(_rect(-1e7, -1e7, 1e7, 1e7, type="floor")), r"lies more than 100000 m"),
+    "degenerate": (_local_plan(_rect(0, 0, 0, 0, type="floor")), r"the plan has no walkable area"),
+    "lonlat_nan": ('{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": '
+                   '{"type": "Polygon", "coordinates": [[[11, 48], [NaN, 48], [11, 48.001], [11, 48]]]}}]}',
+                   r"NaN is not a number"),
+    "passwd": (_local_plan(_rect(0, 0, 10, 10, type="floor"))[:-1] + ', "image": {"file": "../../../../etc/passwd"}}',
+               r"\"image\" \"file\" '\.\./\.\./\.\./\.\./etc/passwd' lies outside the plan's folder"),
+    "hostname": (_local_plan(_rect(0, 0, 10, 10, type="floor"))[:-1] + ', "image": {"file": "/etc/hostname"}}',
+                 r"'/etc/hostname' lies outside the plan's folder"),
+}
+
+
+@pytest.mark.parametrize("name", list(PLANS))
+def test_hostile_floor_plans_are_one_line_errors(name: str, tmp_path: Path, capsys) -> None:
+    text, pattern = PLANS[name]
+    plan = tmp_path / "plan.geojson"
+    plan.write_text(text)
+    folder = write_tables(make_input_tables(), tmp_path / "in")
+    r = run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws", "--floorplan", plan)
+    one_error(r, rf"^error: {re.escape(str(plan))}: .*{pattern}")
+    assert not (tmp_path / "ws").exists()
+
+
+def test_a_plan_image_reached_through_a_link_out_of_its_folder_is_refused(tmp_path: Path, capsys) -> None:
+    (tmp_path / "plans").mkdir()
+    (tmp_path / "plans" / "floor.png").symlink_to("/etc/hostname")
+    plan = tmp_path / "plans" / "plan.geojson"
+    plan.write_text(_local_plan(_rect(0, 0, 10, 10, type="floor"))[:-1] + ', "image": {"file": "floor.png"}}')
+    folder = write_tables(make_input_tables(), tmp_path / "in")
+    one_error(run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws", "--floorplan", plan),
+              r"'floor.png' lies outside the plan's folder")
+
+
+def test_a_plan_over_the_vertex_limit_is_refused_and_one_under_it_fits_in_memory(tmp_path: Path) -> None:
+    """A plan of 1e6 vertices took 2.08 GB; the limit is 100,000 (the ILC floors' plans have 1,000-6,000)."""
+    import json
+
+    def circle(n: int) -> Path:
+        a = 2 * np.pi * np.arange(n) / n
+        ring = np.c_[10 + 8 * np.cos(a), 10 + 8 * np.sin(a)].round(4).tolist()
+        f = tmp_path / f"plan{n}.geojson"
+        f.write_text(json.dumps({"type": "FeatureCollection", "frame": "local_m", "features": [
+            {"type": "Feature", "properties": {"type": "floor"},
+             "geometry": {"type": "Polygon", "coordinates": [ring + ring[:1]]}}]}))
+        return f
+
+    folder = write_tables(make_input_tables(), tmp_path / "in")
+    big = circle(limits.MAX_PLAN_VERTICES + 1)
+    r = run_capped("ingest", folder, "-w", tmp_path / "ws", "-q", "--floorplan", big)
+    one_error(r, rf"{re.escape(str(big))}: not a usable GeoJSON floor plan: 100,002 vertices: at most 100,000")
+    r = run_capped("ingest", folder, "-w", tmp_path / "ws", "-q", "--floorplan", circle(limits.MAX_PLAN_VERTICES - 1))
+    assert r.code == 0 and r.peak_rss_mb < 1024, (r.err, r.peak_rss_mb)
+    r = run_capped("export-map", "-w", tmp_path / "ws", "-q")  # reads the workspace's copy (outline + walkable)
+    assert r.code == 2 and "no optimize outputs" in r.err, r.err
+
+
+@pytest.mark.parametrize("info, pattern", [
+    ('{"map_info": {"height": 1e400, "width": 100}}', r"floor_info.json: invalid JSON: number 1e400 is beyond"),
+    ('{"map_info": {"height": 100, "width": -5}}', r'floor_info.json: map_info "width" must be a number of metres '
+                                                   r"in \(0, 2000\], got -5"),
+    ('{"map_info": {"height": 0, "width": 0}}', r'map_info "width" must be .* got 0'),
+    ('{"map_info": {"height": 1e7, "width": 1e7}}', r'map_info "width" must be'),
+    ('{"map_info": {"height": true, "width": 10}}', r'map_info "height" must be'),
+    ('{"map_info": []}', r'no "map_info" object'),
+    ("[" * 50_000 + "]" * 50_000, r"nested deeper than 64 levels"),
+])
+def test_hostile_floor_info_is_a_one_line_error(info: str, pattern: str, tmp_path: Path, capsys) -> None:
+    """height 1e400 / width -5 gave a GEOSException, 0 x 0 `no Polygon or MultiPolygon features` (issue 40)."""
+    folder = tmp_path / "F1"
+    (folder / "path_data_files").mkdir(parents=True)
+    (folder / "path_data_files" / "trace.txt").write_text(ILC_FIXTURE.read_text())
+    (folder / "geojson_map.json").write_text(
+        '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {"type": '
+        '"Polygon", "coordinates": [[[116.0, 39.0], [116.001, 39.0], [116.001, 39.001], [116.0, 39.0]]]}}]}')
+    (folder / "floor_info.json").write_text(info)
+    one_error(run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws"), pattern)
+
+
+def test_the_distance_field_of_the_largest_plan_stays_small() -> None:
+    from rmbuild.floorplan import FIELD_MAX_CELLS, frame_correction, from_features
+
+    plan = from_features([_rect(0, 0, limits.MAX_PLAN_SIZE_M, limits.MAX_PLAN_SIZE_M, type="floor")], lambda a: a)
+    grid, _, res = plan.distance_field()
+    assert grid.size <= FIELD_MAX_CELLS * 1.01 and res > 0.5
+    # fixes spread over 100 km are not searched for a correction (their raster would be 1e10 cells)
+    c = frame_correction(plan, np.array([[0.0, 0.0], [1e5, 1e5], [-1e5, 0.0]]))
+    assert c["searched"] is False and c["best_inside"] == c["inside"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import gzip
 import io
-import json
 import re
 import zlib
 from collections import Counter
@@ -27,6 +26,8 @@ from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.io.floor_image import attach_image, read_image
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.io.jsonfile import read_json_file
+from rmbuild.limits import MAX_PLAN_BYTES, MAX_PLAN_SIZE_M
 from rmbuild.pdr import ImuSignals, accuracy_flags, rotation_vector_quat, yaw_from_quat
 
 FORMAT_NAME = "msft-ilc"
@@ -431,16 +432,31 @@ def _floor_plans(files: list[Path]) -> dict[str, dict]:
     for folder, byname in folders.items():
         if not {"geojson_map.json", "floor_info.json"} <= set(byname):
             continue
+        w, h = _floor_size(byname["floor_info.json"])
+        doc = read_json_file(byname["geojson_map.json"], MAX_PLAN_BYTES, "floor plan")
         try:
-            info = json.loads(byname["floor_info.json"].read_text())["map_info"]
-            doc = json.loads(byname["geojson_map.json"].read_text())
-            w, h = float(info["width"]), float(info["height"])
             out[folder.name] = to_geojson(from_ilc(doc, w, h, folder.name))
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
             raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
         if "floor_image.png" in byname:
             out[folder.name] = attach_image(out[folder.name], read_image(byname["floor_image.png"]), [0.0, 0.0, w, h])
     return out
+
+
+def _floor_size(path: Path) -> tuple[float, float]:
+    """``floor_info.json``'s ``map_info`` width and height (m): numbers in (0, MAX_PLAN_SIZE_M]."""
+    info = read_json_file(path, 1 << 20, "floor_info.json")
+    m = info.get("map_info") if isinstance(info, dict) else None
+    if not isinstance(m, dict):
+        raise InputError('no "map_info" object with "width" and "height"', str(path))
+    out = []
+    for k in ("width", "height"):
+        v = m.get(k)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= MAX_PLAN_SIZE_M:
+            raise InputError(f'map_info "{k}" must be a number of metres in (0, {MAX_PLAN_SIZE_M:g}], got '
+                             f"{str(v)[:40]}", str(path))
+        out.append(float(v))
+    return out[0], out[1]
 
 
 def _trace_floor(tr: _Trace, path: Path) -> str:

@@ -11,7 +11,6 @@ import csv
 import difflib
 import gzip
 import io
-import json
 import math
 import os
 import re
@@ -27,6 +26,7 @@ import pyarrow as pa
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.errors import InputError, one_line
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.io.jsonfile import read_json_file
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "ble", "fixes", "imu")
@@ -92,6 +92,8 @@ def _table_of(p: Path) -> str | None:
 
 #: columns; no table of the schema (nor a truth table) has more than a dozen
 MAX_COLUMNS = 1000
+#: bytes of truth/venue.json (simulate writes a few kB)
+MAX_VENUE_BYTES = 64 * 2**20
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
 _ARROW_STR = pd.ArrowDtype(pa.string())
 #: bytes per chunk of the scan for fields starting with a space (bounded memory on any file size)
@@ -533,10 +535,7 @@ class RmbuildSchemaReader(Reader):
             if t == "truth/provenance":
                 continue
             if t == "truth/venue":
-                try:
-                    raw.venue = json.loads(fs[0].read_text())
-                except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
-                    raise InputError(f"invalid JSON ({e})", str(fs[0])) from None
+                raw.venue = read_json_file(fs[0], MAX_VENUE_BYTES, "venue.json")
             elif t.startswith("truth/") and t != "truth/poses":
                 name = t.removeprefix("truth/")
                 df = pd.concat([_as_stored(_read_file(f)) for f in fs], ignore_index=True)
