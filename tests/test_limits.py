@@ -204,3 +204,14 @@ def test_the_distance_field_of_the_largest_plan_stays_small() -> None:
     # fixes spread over 100 km are not searched for a correction (their raster would be 1e10 cells)
     c = frame_correction(plan, np.array([[0.0, 0.0], [1e5, 1e5], [-1e5, 0.0]]))
     assert c["searched"] is False and c["best_inside"] == c["inside"]
+
+
+def test_workspace_files_nested_100000_deep_are_not_internal_errors(tmp_path: Path, capsys) -> None:
+    folder = write_tables(make_input_tables(), tmp_path / "in")
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "ingest", folder, "-w", ws, "-q").code == 0
+    (ws / "build_state.json").write_text("[" * 100_000 + "]" * 100_000)
+    (ws / "data" / "stage.json").write_text("[" * 100_000 + "]" * 100_000)
+    one_error(run_cli(capsys, "optimize", "-w", ws, "-q"), r"has no ingest outputs")
+    (ws / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
+    one_error(run_cli(capsys, "optimize", "-w", ws, "-q"), r"is not an rmbuild workspace")

@@ -131,7 +131,7 @@ def _info(fd: int) -> dict:
     """What the last writer recorded in the lock file ({} when nothing readable)."""
     try:
         info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return {}
     return info if isinstance(info, dict) else {}
 

@@ -596,7 +596,7 @@ def _read_marker(root: Path) -> dict | None:
         if not p.is_file() or p.stat().st_size > MAX_MARKER_BYTES:
             return None
         m = json.loads(p.read_bytes())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return m if isinstance(m, dict) else None
 
@@ -631,7 +631,7 @@ def _read_record(p: Path, stage: str) -> dict | None:
         if not p.is_file() or p.stat().st_size > 64 * MAX_MARKER_BYTES:
             return None
         rec = json.loads(p.read_bytes())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     ok = isinstance(rec, dict) and rec.get("stage") == stage and isinstance(rec.get("files"), dict)
     return rec if ok else None

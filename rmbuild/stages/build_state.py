@@ -40,7 +40,7 @@ def read_state(workspace: str | Path) -> dict | None:
     p = Workspace(workspace).path("build.state")
     try:
         s = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     ok = isinstance(s, dict) and s.get("version") == STATE_VERSION and isinstance(s.get("floors"), dict)
     return s if ok else None

@@ -116,7 +116,7 @@ def building_page(workspace: str | Path, reports: dict[str, dict], index: Path) 
     if ev.is_file():
         try:
             fc = json.loads(ev.read_text()).get("building", {}).get("floor_classification")
-        except ValueError:
+        except (ValueError, RecursionError):
             fc = None
     hit = "" if not fc else (f"<p>Floor hit rate on the test scans: {fc['hit_rate']:.1%} of {fc['n']} "
                              f"(single scans {fc['hit_rate_single_scan']:.1%}).</p>")
