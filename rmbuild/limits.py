@@ -22,8 +22,12 @@ MAX_FINGERPRINT_CELLS = 20_000_000
 #: bytes a gzip-compressed input file may expand to (a "gzip bomb" expands 1,000-fold); decompress a larger
 #: file first: plain files are read as they are
 MAX_GUNZIP_BYTES = 128 * 2**20
-#: bytes of one trace file (MS ILC, IPIN), read whole: the largest published trace has 4 MB
-MAX_TRACE_BYTES = 64 * 2**20
+#: cells (rows × columns) of a Parquet input table, known from its footer before anything is decoded (a
+#: few KB of run-length-encoded values can decode to GBs): ~5 million rows of a six-column table
+MAX_PARQUET_CELLS = 32_000_000
+#: bytes of one trace file (MS ILC, IPIN), read whole (~2.5 hours of 50 Hz IMU): the largest published trace
+#: has 4 MB, and a trace at this limit needs at most ~700 MB
+MAX_TRACE_BYTES = 96 * 2**20
 #: bytes of a floor plan file (a detailed mall floor's GeoJSON is a few MB)
 MAX_PLAN_BYTES = 64 * 2**20
 #: vertices of one floor plan: the MS ILC floors' plans have 1,000-6,000

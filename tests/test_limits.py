@@ -215,3 +215,99 @@ def test_workspace_files_nested_100000_deep_are_not_internal_errors(tmp_path: Pa
     one_error(run_cli(capsys, "optimize", "-w", ws, "-q"), r"has no ingest outputs")
     (ws / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
     one_error(run_cli(capsys, "optimize", "-w", ws, "-q"), r"is not an rmbuild workspace")
+
+
+# ------------------------------------------------------------------------------ compressed and large inputs
+def _gzip_bomb(path: Path, head: bytes, filler: bytes, total: int) -> Path:
+    """``head`` then ``filler`` repeated to ``total`` bytes, gzip'd: one member per MB of filler (a gzip
+    file may be a sequence of members), compressed once (a few MB on disk, written in a moment)."""
+    import gzip
+
+    block = gzip.compress(filler * max(1, (1 << 20) // len(filler)), compresslevel=9)
+    with path.open("wb") as fh:
+        fh.write(gzip.compress(head))
+        for _ in range(total >> 20):
+            fh.write(block)
+    return path
+
+
+@pytest.mark.parametrize("filler", [b"#" + b"x" * 1000 + b"\n", b"\n", b"x"])
+def test_a_gzip_bomb_trace_is_refused_at_the_limit(filler: bytes, tmp_path: Path) -> None:
+    """A 3 MB MS ILC .txt.gz expanding to 3 GB ran out of memory at 2.5 GB; decompression now stops past the
+    limit, in bounded memory."""
+    (tmp_path / "in").mkdir()
+    f = _gzip_bomb(tmp_path / "in" / "trace.txt.gz", ILC_FIXTURE.read_bytes(), filler, 3 << 30)
+    assert f.stat().st_size < 20 << 20
+    r = run_capped("ingest", tmp_path / "in", "-w", tmp_path / "ws", "-q", "--format", "msft-ilc")
+    one_error(r, rf"{re.escape(str(f))}: trace decompresses to more than 96 MB: at most 96 MB in one trace")
+    assert r.peak_rss_mb < 1024, r.peak_rss_mb
+
+
+@pytest.mark.parametrize("filler", [b"walk0,0.1,00:11:22:33:44:00,-50.0,2437.0,net0\n", b"\n", b"x"])
+def test_a_gzip_bomb_table_is_refused_at_the_limit(filler: bytes, tmp_path: Path) -> None:
+    t = make_input_tables()
+    folder = write_tables({k: v for k, v in t.items() if k != "wifi"}, tmp_path / "in")
+    f = _gzip_bomb(folder / "wifi.csv.gz", t["wifi"].to_csv(index=False).encode(), filler, 3 << 30)
+    r = run_capped("ingest", folder, "-w", tmp_path / "ws", "-q")
+    one_error(r, rf"{re.escape(str(f))}: gzip data expands to more than 128 MB \(the limit of a compressed input")
+    assert r.peak_rss_mb < 1024, r.peak_rss_mb
+
+
+def test_ipin_gzip_bomb_and_oversized_logfiles_are_refused(tmp_path: Path, capsys) -> None:
+    src = Path(__file__).resolve().parent / "fixtures" / "ipin" / "tiny_logfile.txt"
+    (tmp_path / "a").mkdir()
+    f = _gzip_bomb(tmp_path / "a" / "logfile.txt.gz", src.read_bytes(), b"\n", 1 << 30)
+    one_error(run_cli(capsys, "ingest", tmp_path / "a", "-w", tmp_path / "ws", "--format", "ipin"),
+              rf"{re.escape(str(f))}: logfile decompresses to more than 96 MB")
+    (tmp_path / "b").mkdir()
+    big = tmp_path / "b" / "logfile.txt"
+    with big.open("wb") as fh:
+        fh.write(src.read_bytes())
+        fh.truncate(limits.MAX_TRACE_BYTES + 1)  # a sparse file: no disk used
+    one_error(run_cli(capsys, "ingest", tmp_path / "b", "-w", tmp_path / "ws", "--format", "ipin"),
+              rf"{re.escape(str(big))}: logfile of 100,663,297 bytes: at most 96 MB \(100,663,296 bytes\) in one "
+              r"logfile")
+
+
+def test_a_parquet_table_decoding_to_gbs_is_refused_before_it_is_decoded(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    t = make_input_tables()
+    folder = write_tables({k: v for k, v in t.items() if k != "wifi"}, tmp_path / "in")
+    n = 40_000_000  # one constant, run-length encoded: ~100 KB on disk, 1.3 GB decoded
+    pq.write_table(pa.table({c: pa.repeat(v, n) for c, v in
+                             (("walk_id", "walk0"), ("t_s", 0.1), ("bssid", "ab"), ("rssi_dbm", -50.0))}),
+                   folder / "wifi.parquet", row_group_size=n // 4)
+    assert (folder / "wifi.parquet").stat().st_size < 5 << 20
+    r = run_capped("ingest", folder, "-w", tmp_path / "ws", "-q")
+    one_error(r, r"wifi.parquet: 40,000,000 rows x 4 columns: at most 32,000,000 cells in a Parquet input table")
+    assert r.peak_rss_mb < 1024, r.peak_rss_mb
+
+
+def test_an_ilc_trace_of_a_million_wifi_lines_fits_in_memory(tmp_path: Path) -> None:
+    """1e6 TYPE_WIFI lines (~70 MB) took 2.26 GB (the fast parser's index arrays: 8 bytes per byte of the
+    file); now the parser works a block of lines at a time."""
+    lines = [ln for ln in ILC_FIXTURE.read_text().split("\n") if "TYPE_WIFI" not in ln and ln]
+    times = [int(ln.split("\t")[0]) for ln in lines if ln[0].isdigit()]
+    t0, t1 = min(times), max(times)
+    (tmp_path / "in").mkdir()
+    with (tmp_path / "in" / "trace.txt").open("w") as fh:
+        fh.write("\n".join(lines) + "\n")
+        for s in range(10_000):
+            t = t0 + (t1 - t0) * s // 10_000
+            fh.write("".join(f"{t}\tTYPE_WIFI\tNet{a}\t0a:00:00:00:00:{a:02x}\t{-40 - a % 50}\t2412\t{t}\n"
+                             for a in range(100)))
+    r = run_capped("ingest", tmp_path / "in", "-w", tmp_path / "ws", "-q")
+    assert r.code == 0, r.err
+    assert r.peak_rss_mb < 1024, r.peak_rss_mb
+
+
+def test_an_ilc_trace_that_is_not_utf8_names_its_line(tmp_path: Path, capsys) -> None:
+    """The error named a byte offset of the file, not a line (issue 40)."""
+    data = ILC_FIXTURE.read_bytes().split(b"\n")
+    data[300] = data[300][:20] + b"\xff\xfe" + data[300][20:]
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "trace.txt").write_bytes(b"\n".join(data))
+    one_error(run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws"),
+              r"trace.txt:301: not UTF-8 text \(byte 21 of the line: invalid start byte\)")
