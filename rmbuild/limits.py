@@ -13,12 +13,23 @@ from __future__ import annotations
 MAX_COORD_M = 1e5
 #: m; the distance one walk may cover, step by step (a day's walking is ~30 km)
 MAX_WALK_PATH_M = 1e5
+#: rows of an anchors file (known positions; 100,000 anchors need ~350 MB in optimize)
+MAX_ANCHORS = 100_000
 #: poses (steps) in one walk: a walk is one recording session; 100,000 steps are ~16 hours of walking
 MAX_WALK_POSES = 100_000
 #: cells of the per-node fingerprint table (nodes with readings × distinct APs), which the optimizer and
 #: the map hold dense: 20 million (160 MB as RSSI + counts). The largest real floor here (MS ILC site1/B1):
 #: 2,299 nodes × 1,358 APs = 3.1 million
 MAX_FINGERPRINT_CELLS = 20_000_000
+#: cells of a radio map's bounding box (its pictures and viewer images are rasters of it): 2 x 2 km at 1 m,
+#: 4 x 4 km at the default 2 m
+MAX_MAP_RASTER_CELLS = 4_000_000
+#: entries of a radio map's dense tables (cells × APs), filled cells included
+MAX_MAP_CELLS = 20_000_000
+#: scans `localize` takes in one run (~1.5 kB of memory each: ~140 hours of scans every 2 s), and the cells
+#: of their table (scans × the map's APs), held dense like the fingerprints
+MAX_QUERIES = 250_000
+MAX_QUERY_CELLS = 20_000_000
 #: bytes a gzip-compressed input file may expand to (a "gzip bomb" expands 1,000-fold); decompress a larger
 #: file first: plain files are read as they are
 MAX_GUNZIP_BYTES = 128 * 2**20

@@ -311,3 +311,83 @@ def test_an_ilc_trace_that_is_not_utf8_names_its_line(tmp_path: Path, capsys) ->
     (tmp_path / "in" / "trace.txt").write_bytes(b"\n".join(data))
     one_error(run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws"),
               r"trace.txt:301: not UTF-8 text \(byte 21 of the line: invalid start byte\)")
+
+
+# ------------------------------------------------------------------------------ maps, anchors, localize
+def test_a_map_spread_over_kilometres_is_refused_before_its_raster_is_allocated() -> None:
+    from rmbuild.config import MapConfig
+    from rmbuild.errors import InputError
+    from rmbuild.radiomap import build_radio_map
+
+    xy = np.array([[0.0, 0.0], [30_000.0, 30_000.0]])
+    wifi = pd.DataFrame({"node": [0, 1], "bssid": ["a", "a"], "rssi_dbm": [-50.0, -60.0], "t_s": [0.0, 1.0]})
+    with pytest.raises(InputError, match=r"the map's nodes span 30,000 x 30,000 m: at cell_size_m = 2 m a raster "
+                                         r"of 225,030,001 cells, at most 4,000,000"):
+        build_radio_map(wifi, xy, np.array(["w", "w"]), MapConfig())
+    # 1 km apart at 1 m: accepted; the fill looks at the cells' neighbourhoods, not their bounding box
+    # (which asked for a (1000 + 2r) x (1000 + 2r) grid of candidates and a Python set of it)
+    rm = build_radio_map(wifi, xy / 30.0, np.array(["w", "w"]),
+                         MapConfig(cell_size_m=1.0, fill=MapConfig().fill.__class__(method="idw", max_distance_m=3.0)))
+    assert rm.cells["interpolated"].sum() == 2 * 28  # the 29 cells within 3 m of each visited one, less itself
+
+
+def test_the_fill_refuses_more_candidates_than_a_map_holds(monkeypatch) -> None:
+    import rmbuild.radiomap.fill as fill
+    from rmbuild.config import MapConfig
+    from rmbuild.config.radiomap import FillConfig
+    from rmbuild.errors import InputError
+    from rmbuild.radiomap import build_radio_map
+
+    monkeypatch.setattr(fill, "MAX_MAP_CELLS", 100)
+    xy = np.array([[0.0, 0.0], [40.0, 0.0]])
+    wifi = pd.DataFrame({"node": [0, 1], "bssid": ["a", "b"], "rssi_dbm": [-50.0, -60.0], "t_s": [0.0, 1.0]})
+    with pytest.raises(InputError, match=r"fill: 631 unvisited cells within fill.max_distance_m = 20 m of the 2 "
+                                         r"visited ones, x 2 APs: more than the 100 entries"):
+        build_radio_map(wifi, xy, np.array(["w", "w"]), MapConfig(fill=FillConfig(method="idw", max_distance_m=20.0)))
+
+
+def test_an_anchors_file_of_more_than_the_limit_is_refused(tmp_path: Path) -> None:
+    from rmbuild.errors import InputError
+    from rmbuild.io.anchors import read_anchors
+
+    n = limits.MAX_ANCHORS + 1
+    f = tmp_path / "anchors.csv"
+    pd.DataFrame({"walk_id": "walk0", "t_s": np.arange(n) * 0.01, "x_m": 1.0, "y_m": 2.0}).to_csv(f, index=False)
+    with pytest.raises(InputError, match=rf"^{re.escape(str(f))}:100002: 100,001 anchors: at most 100,000 in one "
+                                         "file"):
+        read_anchors(f)
+
+
+@pytest.fixture(scope="module")
+def mapped(tmp_path_factory) -> Path:
+    """A workspace of the tiny input tables with its radio map."""
+    from rmbuild.config import IngestConfig, MapConfig, OptimizeConfig
+    from rmbuild.stages import export_map, ingest, optimize
+
+    root = tmp_path_factory.mktemp("mapped")
+    inp = write_tables(make_input_tables(n_walks=3, n_steps=40), root / "in")
+    ingest.run([inp], root / "ws", IngestConfig())
+    optimize.run(root / "ws", OptimizeConfig())
+    export_map.run(root / "ws", MapConfig())
+    return root / "ws"
+
+
+def test_localize_of_a_million_one_reading_scans_is_refused_in_bounded_memory(mapped: Path, tmp_path: Path) -> None:
+    """`localize` of 1e6 rows took 1.53 GB (a dense 1e6 x APs table of float64 sums and counts)."""
+    n = 1_000_000
+    (tmp_path / "q").mkdir()
+    pd.DataFrame({"walk_id": "q", "t_s": np.arange(n) * 2.0, "bssid": "00:11:22:33:44:01",
+                  "rssi_dbm": -60.0}).to_csv(tmp_path / "q" / "wifi.csv", index=False)
+    r = run_capped("localize", tmp_path / "q", "-w", mapped, "-o", tmp_path / "out.csv", "-q")
+    one_error(r, rf"{re.escape(str(tmp_path / 'q'))}: 1,000,000 scans: at most 250,000 in one run")
+    assert r.peak_rss_mb < 1024 and not (tmp_path / "out.csv").exists(), r.peak_rss_mb
+
+
+def test_localize_at_the_query_limit_fits_in_memory(mapped: Path, tmp_path: Path) -> None:
+    n = limits.MAX_QUERIES
+    (tmp_path / "q").mkdir()
+    pd.DataFrame({"walk_id": "q", "t_s": np.arange(n) * 2.0, "bssid": "00:11:22:33:44:01",
+                  "rssi_dbm": -60.0}).to_csv(tmp_path / "q" / "wifi.csv", index=False)
+    r = run_capped("localize", tmp_path / "q", "-w", mapped, "-o", tmp_path / "out.csv", "-q")
+    assert r.code == 0 and r.peak_rss_mb < 1024, (r.err, r.peak_rss_mb)
+    assert len(pd.read_csv(tmp_path / "out.csv")) == n

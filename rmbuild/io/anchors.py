@@ -17,7 +17,7 @@ import pandas as pd
 
 from rmbuild.errors import InputError
 from rmbuild.io.formats.rmbuild_schema import check_columns, coerce, read_located
-from rmbuild.limits import MAX_COORD_M
+from rmbuild.limits import MAX_ANCHORS, MAX_COORD_M
 from rmbuild.types import Dataset
 
 ANCHOR_SCHEMA = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num"}
@@ -47,6 +47,9 @@ def read_anchors(path: str | Path) -> Anchors:
         raise InputError("anchors file not found", str(p))
     loc = read_located(p, ANCHOR_SCHEMA, {"label": "str"})
     check_columns(loc, ANCHOR_SCHEMA, {"label": "str"})
+    if len(loc.df) > MAX_ANCHORS:
+        raise InputError(f"{len(loc.df):,} anchors: at most {MAX_ANCHORS:,} in one file (known positions are "
+                         "landmarks, not a track)", loc.where(MAX_ANCHORS))
     coerce(loc, {**ANCHOR_SCHEMA, "label": "str"})
     df = loc.df[list(ANCHOR_SCHEMA)].reset_index(drop=True)
     xy = df[["x_m", "y_m"]].to_numpy(float)
