@@ -51,7 +51,7 @@ import pandas as pd
 
 from rmbuild import __version__
 from rmbuild.errors import InputError, WorkspaceError
-from rmbuild.io.atomic import clean_json, recover_dir, replacing_dir, write_json_atomic
+from rmbuild.io.atomic import clean_json, recover_dir, refuse_link, replacing_dir, write_json_atomic
 from rmbuild.io.lock import holds_lock, workspace_lock
 from rmbuild.types import WIFI_COLUMNS, Dataset, Fingerprints
 
@@ -286,9 +286,10 @@ class Workspace:
         """Create (or with ``force`` replace) a workspace holding the ingest stage, atomically.
 
         Refuses to replace an existing non-empty directory without ``force``, and never replaces a
-        directory that is not an rmbuild workspace (one whose manifest.json is rmbuild's marker).
+        directory that is not an rmbuild workspace (one whose manifest.json is rmbuild's marker). A ``root``
+        that is a symbolic link stands for the directory it points to, which is replaced (the link stays).
         """
-        root = Path(root)
+        root = _resolved_root(root)
         with workspace_lock(root, "ingest"):
             recover_dir(root)
             check_replaceable(root, force)
@@ -306,7 +307,7 @@ class Workspace:
                         force: bool = False) -> Iterator[dict[str, StageWriter]]:
         """Create (or with ``force`` replace) a building workspace, atomically: one ingest writer per floor
         (``floors``: name -> level, None when unknown), each floor a whole workspace under ``floors/``."""
-        root = Path(root)
+        root = _resolved_root(root)
         dirs = walk_file_names(floors)
         with workspace_lock(root, "ingest"):
             recover_dir(root)
@@ -566,8 +567,44 @@ def level_of_floor(root: str | Path) -> int | None:
 
 
 def building_report_path(root: str | Path, command: str) -> Path:
-    """Where a stage's building-level report goes (``building/<command>.json``)."""
+    """Where a stage's building-level report goes (``building/<command>.json``); LinkError when its folder
+    is a symbolic link (never written through)."""
+    refuse_link(Path(root) / BUILDING_DIR)
     return Path(root) / BUILDING_DIR / f"{command}.json"
+
+
+def _resolved_root(root: str | Path) -> Path:
+    """``root`` with a symbolic link at its last component resolved (the workspace it points to)."""
+    p = Path(root)
+    return p.resolve() if p.is_symlink() else p
+
+
+#: what commands write inside a workspace besides its stage directories, relative to its root: the report
+#: page, its figures' folder, and rerun recordings (``*.rrd``)
+OUTPUTS_IN_WORKSPACE = ("report.html", "report")
+
+
+def check_outside_workspace(path: str | Path, what: str = "output") -> None:
+    """InputError when ``path`` (an output a user names) falls among a workspace's own files: its stage
+    directories, marker, build state, building reports or floors (anything but the report page, its
+    figures and recordings), or is a workspace's lock file; never written, even with --force."""
+    p = Path(path)
+    full = p.parent.resolve() / p.name
+    if full.name.startswith(".") and full.name.endswith(".lock") and \
+            _is_marker(_read_marker(full.parent / full.name[1:-len(".lock")])):
+        raise InputError(f"{what} {p} is the lock file of workspace {full.parent / full.name[1:-5]}; choose "
+                         "another path")
+    for ws in full.parents:
+        if not _is_marker(_read_marker(ws)):
+            continue
+        parts = full.relative_to(ws).parts
+        ok = (len(parts) == 1 and (parts[0] in OUTPUTS_IN_WORKSPACE or parts[0].endswith(".rrd"))) or \
+            (len(parts) == 2 and parts[0] == ARTEFACTS["report.png_dir"])
+        if not ok:
+            raise InputError(f"{what} {p} lies among the files of workspace {ws} ({parts[0]}), which only rmbuild's "
+                             "stages write; write it outside the workspace (or as its report.html, report/ or "
+                             "*.rrd)")
+        return
 
 
 def _recover(root: Path) -> None:
@@ -672,8 +709,14 @@ def write_dataset(writer: StageWriter, ds: Dataset, fp: Fingerprints) -> None:
 
 
 def check_output_file(path: str | Path, force: bool, what: str = "output") -> Path:
-    """Refuse to replace an existing file (a report, a recording) without ``force``; returns the path."""
+    """Refuse to replace an existing file (a report, a recording) without ``force``, to write through a
+    symbolic link, or to write among a workspace's own files (:func:`check_outside_workspace`); returns the
+    path."""
     p = Path(path)
+    if p.is_symlink():
+        raise InputError(f"{what} {p} is a symbolic link; rmbuild never writes through one: give the file it "
+                         "points to, or another name")
+    check_outside_workspace(p, what)
     if p.is_dir():
         raise InputError(f"{what} {p} is a directory")
     if p.exists() and not force:

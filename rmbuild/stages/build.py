@@ -22,7 +22,7 @@ from rmbuild.config.build import parse_scheduler
 from rmbuild.errors import RmbuildError, one_line
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floorplan import plan_image_file
-from rmbuild.io.lock import workspace_lock
+from rmbuild.io.lock import shared_while, workspace_lock
 from rmbuild.io.venues import Venue
 from rmbuild.io.workspace import (
     Workspace,
@@ -159,6 +159,9 @@ def run_floors_as_tasks(workspace: str | Path, cfgs: dict[str, Any], force: bool
         if runner is None or len(todo) <= 1:  # one floor (a single-floor workspace): in this process
             runner = stack.enter_context(executor(sched, len(todo), cfgs["build"].worker_memory_gb, on_cluster))
         runner.fit(len(todo))
+        # the floors' tasks lock their floors (and the building, shared): in worker processes they could not
+        # while this one held the building exclusively
+        stack.enter_context(shared_while(workspace))
         ran = _run_round(runner, run_floor, todo, progress, f"floors ({cfgs['build'].scheduler})", "floors",
                          _state_keeper(workspace, state, items)) if todo else {}
         t_tasks = time.perf_counter() - t0
@@ -242,8 +245,10 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
         for n, ws in list(wss.items()):
             try:
                 vitems, indexes[n] = _floor_items(ws, vcfgs[n], force)
-                if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's)
+                if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's),
+                    # shared while the floors' tasks run on the workers (they lock their floors and it, shared)
                     locks.enter_context(workspace_lock(ws, "build"))
+                    locks.enter_context(shared_while(ws))
             except RmbuildError as e:  # taken by another command since its ingest: this venue only
                 not_run[n] = one_line(str(e))
                 del wss[n]

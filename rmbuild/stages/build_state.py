@@ -98,7 +98,10 @@ def keeping_unchanged_floors(workspace: str | Path, state: dict | None) -> Itera
     them. A kill leaves ``.<name>.keep-<pid>`` beside the workspace, removed by the next run."""
     root = Path(workspace).resolve()
     for left in root.parent.glob(f".{root.name}.keep-*"):
-        shutil.rmtree(left, ignore_errors=True)
+        if left.is_symlink():  # not ours: removed, never followed
+            left.unlink()
+        else:
+            shutil.rmtree(left, ignore_errors=True)
     kept: set[str] = set()
     old = building_floors(root) if state else None
     done = {n for n, e in (state or {}).get("floors", {}).items() if (e.get("result") or {}).get("ok")}
