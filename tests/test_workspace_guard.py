@@ -177,3 +177,34 @@ def test_outputs_never_land_among_a_workspace_s_files(single: Path, tmp_path: Pa
     (tmp_path / "link.csv").symlink_to(single / "map" / "radiomap.parquet")
     r = run_cli(capsys, "localize", q, "-w", single, "-o", tmp_path / "link.csv", "--force", "-q")
     assert r.code == 2 and "is a symbolic link" in r.err
+
+
+# ------------------------------------------------------------------------------ build and outputs made by hand
+def test_build_never_replaces_what_was_made_by_hand(tmp_path: Path, capsys) -> None:
+    """After `export-map --cell-size 5` (or `optimize --anchors`) a plain `build` rebuilt the defaults saying
+    only "inputs unchanged" (issue 40); it now refuses, saying what differs, and --force rebuilds."""
+    import json
+
+    from conftest import make_input_tables, write_tables
+
+    t = make_input_tables(n_walks=3, n_steps=40)
+    folder = write_tables(t, tmp_path / "in")
+    t["fixes"][["walk_id", "t_s", "x_m", "y_m"]].to_csv(tmp_path / "anchors.csv", index=False)
+    ws = tmp_path / "ws"
+    assert run_cli(capsys, "build", folder, "-w", ws, "-q").code == 0
+    assert run_cli(capsys, "build", folder, "-w", ws, "-q").code == 0  # up to date: nothing to do, no refusal
+
+    def cell() -> float:
+        return json.loads((ws / "map" / "report.json").read_text())["cell_size_m"]
+
+    assert run_cli(capsys, "export-map", "-w", ws, "--cell-size", "5", "--force", "-q").code == 0
+    r = run_cli(capsys, "build", folder, "-w", ws, "-q")
+    assert r.code == 2 and len(r.err.strip().splitlines()) == 1, r.err
+    assert "map (map.cell_size_m = 5.0 (build: 2.0)) made by hand since the last build" in r.err
+    assert "pass --force" in r.err and cell() == 5.0
+    assert run_cli(capsys, "optimize", "-w", ws, "--anchors", tmp_path / "anchors.csv", "--force", "-q").code == 0
+    r = run_cli(capsys, "build", folder, "-w", ws, "-q")
+    assert r.code == 2 and "optimize (same config: other options or inputs)" in r.err, r.err
+    assert run_cli(capsys, "build", folder, "-w", ws, "--force", "-q").code == 0
+    assert cell() == 2.0
+    assert run_cli(capsys, "build", folder, "-w", ws, "-q").code == 0

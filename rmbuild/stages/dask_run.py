@@ -43,7 +43,10 @@ def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Sched
 
 class Runner(Protocol):
     """Runs ``fn`` over ``items`` (name -> args), returns name -> result (in the order of ``items``), calls
-    ``on_done(name, result)`` as each ends."""
+    ``on_done(name, result)`` as each ends. ``in_process``: the items run in this process (else in other
+    processes, which hold their own workspace locks)."""
+
+    in_process: bool
 
     def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
                  on_done: Callable[[str, dict], None] | None) -> dict[str, dict]: ...
@@ -54,6 +57,8 @@ class Runner(Protocol):
 
 
 class _Serial:
+    in_process = True
+
     def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
                  on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
         out = {}
@@ -68,6 +73,8 @@ class _Serial:
 
 
 class _OnDask:
+    in_process = False
+
     def __init__(self, client: Any, shrinkable: bool, warming: list) -> None:
         self.client, self.shrinkable, self.warming = client, shrinkable, warming
 
