@@ -208,3 +208,24 @@ def test_build_never_replaces_what_was_made_by_hand(tmp_path: Path, capsys) -> N
     assert run_cli(capsys, "build", folder, "-w", ws, "--force", "-q").code == 0
     assert cell() == 2.0
     assert run_cli(capsys, "build", folder, "-w", ws, "-q").code == 0
+
+
+# ------------------------------------------------------------------------------ config files checked whole
+@pytest.mark.parametrize("table", ["[optimize]\nbogus = 1\n", "[map]\ncell_size_m = 0.01\n", "[pdr.msft_ilc]\nbogus = 1\n",
+                                   "[evaluate]\nknn = 3\n"])
+def test_a_config_file_is_checked_whole_by_every_stage(table: str, single: Path, tmp_path: Path, capsys) -> None:
+    """`[optimize] bogus = 1` passed ingest, export-map and evaluate: only the running stage's table was
+    checked (issue 40)."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[ingest]\n" + table)
+    q = tmp_path / "q"
+    q.mkdir()
+    (q / "wifi.csv").write_text("walk_id,t_s,bssid,rssi_dbm\nq,1.0,00:11:22:33:44:01,-60\n")
+    for args in (["ingest", tmp_path / "in", "-w", tmp_path / "ws2"], ["optimize", "-w", single, "--force"],
+                 ["export-map", "-w", single, "--force"], ["evaluate", "-w", single, "--force"],
+                 ["localize", q, "-w", single, "-o", tmp_path / "o.csv"],
+                 ["simulate", tmp_path / "sim", "--preset", "tiny"], ["build", tmp_path / "in", "-w", tmp_path / "b"]):
+        r = run_cli(capsys, *args, "--config", cfg, "-q")
+        assert r.code == 2 and r.err.startswith(f"error: {cfg}:3: "), (args, r.err)
+        assert len(r.err.strip().splitlines()) == 1
+    assert not (tmp_path / "ws2").exists() and not (tmp_path / "sim").exists() and not (tmp_path / "b").exists()
