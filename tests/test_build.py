@@ -227,7 +227,12 @@ def test_venues_a_failed_venue_does_not_stop_the_others(tmp_path: Path, capsys) 
     res = run_cli(capsys, "build", "--venues", venues, "-o", out, "--scheduler", "serial")
     assert res.code == 2, res.err
     assert "venue bad: FAILED" in res.out and "rssi" in res.out.lower()
-    assert "1 failed: bad" in res.err
+    last = res.err.strip().splitlines()[-1]
+    assert last.startswith("error: 1 failed (bad: ") and "rssi_dbm 40" in last
+    # -q: the error line alone says why (issue 40: `error: 1 failed: v1` without the cause)
+    quiet = run_cli(capsys, "build", "--venues", venues, "-o", tmp_path / "out_q", "--scheduler", "serial", "-q")
+    errors = [ln for ln in quiet.err.strip().splitlines() if ln.startswith("error: ")]
+    assert quiet.code == 2 and quiet.out == "" and len(errors) == 1 and "rssi_dbm 40" in errors[0], quiet.err
     # one fix per walk: too little ground truth to score a floor's map, which stands unscored
     assert res.out.count("not evaluated: evaluate:") == 2
     rep = json.loads(building_report_path(out / "mall", "export-map").read_text())

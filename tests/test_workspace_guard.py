@@ -5,7 +5,6 @@ was made by hand without --force; a config file is checked whole."""
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -211,8 +210,8 @@ def test_build_never_replaces_what_was_made_by_hand(tmp_path: Path, capsys) -> N
 
 
 # ------------------------------------------------------------------------------ config files checked whole
-@pytest.mark.parametrize("table", ["[optimize]\nbogus = 1\n", "[map]\ncell_size_m = 0.01\n", "[pdr.msft_ilc]\nbogus = 1\n",
-                                   "[evaluate]\nknn = 3\n"])
+@pytest.mark.parametrize("table", ["[optimize]\nbogus = 1\n", "[map]\ncell_size_m = 0.01\n",
+                                   "[pdr.msft_ilc]\nbogus = 1\n", "[evaluate]\nknn = 3\n"])
 def test_a_config_file_is_checked_whole_by_every_stage(table: str, single: Path, tmp_path: Path, capsys) -> None:
     """`[optimize] bogus = 1` passed ingest, export-map and evaluate: only the running stage's table was
     checked (issue 40)."""
