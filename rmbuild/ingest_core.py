@@ -19,7 +19,7 @@ from rmbuild.errors import InputError
 from rmbuild.geometry import wrap
 from rmbuild.ingest_checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
-from rmbuild.limits import MAX_COORD_M, MAX_FINGERPRINT_CELLS, MAX_WALK_PATH_M, MAX_WALK_POSES
+from rmbuild.limits import MAX_APS, MAX_COORD_M, MAX_FINGERPRINT_CELLS, MAX_WALK_PATH_M, MAX_WALK_POSES
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import (
     BLE_COLUMNS,
@@ -195,7 +195,7 @@ def _check_positions(df: pd.DataFrame, where: Callable[[int], str], what: str) -
         far = ~(v <= MAX_COORD_M)  # NaN too
         if far.any():
             i = _first(far)
-            raise InputError(f"{what}: {c} {float(df[c].iloc[i]):.6g} is more than {MAX_COORD_M:g} m from the origin "
+            raise InputError(f"{what}: {c} {float(df[c].iloc[i]):.10g} is more than {MAX_COORD_M:g} m from the origin "
                              "(the limit of a position)", where(i))
 
 
@@ -228,6 +228,10 @@ def _check_fingerprint_size(readings: pd.DataFrame, where: Callable[[int], str],
         return
     n_nodes = int(pd.unique(readings["node"]).size)
     n_keys = int(readings["bssid"].nunique())
+    if n_keys > MAX_APS:
+        raise InputError(f"{n_keys:,} distinct {keys} in the {label} readings of one floor: at most {MAX_APS:,} (the "
+                         f"optimizer compares scans over every one of them; drop {keys} heard only once or twice, "
+                         "e.g. phones' hotspots)", where(0).rsplit(":", 1)[0])
     if n_nodes * n_keys > MAX_FINGERPRINT_CELLS:
         raise InputError(f"{n_nodes:,} poses with {label} readings of {n_keys:,} distinct {keys}: a fingerprint table "
                          f"of {n_nodes * n_keys:,} cells, at most {MAX_FINGERPRINT_CELLS:,} (split the input, or "

@@ -17,6 +17,9 @@ MAX_WALK_PATH_M = 1e5
 MAX_ANCHORS = 100_000
 #: poses (steps) in one walk: a walk is one recording session; 100,000 steps are ~16 hours of walking
 MAX_WALK_POSES = 100_000
+#: distinct APs (BSSIDs; beacons for BLE) heard on one floor: the optimizer compares pairs of scans over all
+#: of them, held dense (site1/B1, the largest real floor here, has 1,358)
+MAX_APS = 5_000
 #: cells of the per-node fingerprint table (nodes with readings × distinct APs), which the optimizer and
 #: the map hold dense: 20 million (160 MB as RSSI + counts). The largest real floor here (MS ILC site1/B1):
 #: 2,299 nodes × 1,358 APs = 3.1 million

@@ -46,7 +46,7 @@ def test_a_fix_far_away_is_refused(tmp_path: Path, capsys) -> None:
     t["fixes"].loc[1, "y_m"] = -3e9
     folder = write_tables(t, tmp_path / "in")
     one_error(run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws"),
-              r"fixes.csv:3: fixes: y_m -3e\+09 is more than 100000 m")
+              r"fixes.csv:3: fixes: y_m -3000000000 is more than 100000 m")
 
 
 def test_an_ilc_waypoint_of_1e30_names_its_line(tmp_path: Path, capsys) -> None:
@@ -58,6 +58,16 @@ def test_an_ilc_waypoint_of_1e30_names_its_line(tmp_path: Path, capsys) -> None:
     (tmp_path / "in" / "trace.txt").write_text("\n".join(lines))
     one_error(run_cli(capsys, "ingest", tmp_path / "in", "-w", tmp_path / "ws"),
               rf"trace.txt:{i + 1}: fixes: x_m 1e\+30 is more than")
+
+
+def test_a_fingerprint_table_over_the_limit_is_refused(tmp_path: Path, capsys, monkeypatch) -> None:
+    import rmbuild.ingest_core as core
+
+    folder = write_tables(make_input_tables(n_steps=40), tmp_path / "in")
+    monkeypatch.setattr(core, "MAX_FINGERPRINT_CELLS", 20)  # 10 + 10 nodes with readings x 5 APs
+    one_error(run_cli(capsys, "ingest", folder, "-w", tmp_path / "ws"),
+              r"wifi.csv: 20 poses with Wi-Fi readings of 5 distinct BSSIDs: a fingerprint table of 100 cells, at "
+              r"most 20")
 
 
 def test_a_walk_longer_than_the_limits_is_refused(tmp_path: Path, capsys, monkeypatch) -> None:
@@ -86,8 +96,8 @@ def test_a_million_distinct_bssids_is_a_clean_error_in_bounded_memory(tmp_path: 
     t["wifi"] = wifi.sort_values(["walk_id", "t_s"], kind="stable")
     folder = write_tables(t, tmp_path / "in")
     r = run_capped("ingest", folder, "-w", tmp_path / "ws", "-q")
-    one_error(r, rf"{re.escape(str(folder / 'wifi.csv'))}: 800 poses with Wi-Fi readings of 1,000,000 distinct "
-                 rf"BSSIDs: a fingerprint table of 800,000,000 cells, at most {limits.MAX_FINGERPRINT_CELLS:,}")
+    one_error(r, rf"{re.escape(str(folder / 'wifi.csv'))}: 1,000,000 distinct BSSIDs in the Wi-Fi readings of one "
+                 rf"floor: at most {limits.MAX_APS:,}")
     assert r.peak_rss_mb < 1024, r.peak_rss_mb
 
 
