@@ -566,6 +566,17 @@ def level_of_floor(root: str | Path) -> int | None:
     return next((levels.get(n) for n, p in floors.items() if p.resolve() == root), None)
 
 
+def record_digests(root: str | Path) -> dict[str, str]:
+    """{stage: sha256 of its record} of the stages the workspace at ``root`` has (records that are links or
+    not files are left out)."""
+    out = {}
+    for stage, d in STAGE_DIRS.items():
+        p = Path(root) / d / RECORD
+        if p.is_file() and not p.is_symlink():
+            out[stage] = _sha256_bytes(p.read_bytes())
+    return out
+
+
 def building_report_path(root: str | Path, command: str) -> Path:
     """Where a stage's building-level report goes (``building/<command>.json``); LinkError when its folder
     is a symbolic link (never written through)."""

@@ -18,7 +18,6 @@ built with and the floor task's result. A re-run of `build` without ``--force``:
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -32,7 +31,7 @@ from rmbuild import __version__
 from rmbuild.errors import WorkspaceError
 from rmbuild.io.atomic import replacing_dir, write_json_atomic
 from rmbuild.io.lock import workspace_lock
-from rmbuild.io.workspace import STAGE_DIRS, Workspace, building_floors, sha256_file
+from rmbuild.io.workspace import STAGE_DIRS, Workspace, building_floors, record_digests, sha256_file
 
 #: the floor-task stages whose records a complete floor has ("evaluate" too when its result has it)
 FLOOR_STAGES = ("optimize", "map")
@@ -162,12 +161,7 @@ def _input_files(inputs: list[str | Path]) -> list[tuple[str, Path]]:
 
 def stage_records(path: str | Path) -> dict[str, str]:
     """{stage: sha256 of its record} of a floor's workspace, for the stages it has (what the build leaves)."""
-    out = {}
-    for stage, d in STAGE_DIRS.items():
-        p = Path(path) / d / "stage.json"
-        if p.is_file() and not p.is_symlink():
-            out[stage] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return out
+    return record_digests(path)
 
 
 #: stage -> the config section its config.toml holds that the build sets
