@@ -260,8 +260,8 @@ def build_kill(inp: Path, ws: Path, delay_s: float, target: str) -> dict:
     if left:
         problems.append(f"{len(left)} process(es) left")
     if target == "worker" and proc.returncode not in (0, -signal.SIGKILL) and (
-            len(errors) != 1 or not errors[0].startswith("error: ")):
-        problems.append("not one error line")
+            sum(ln.startswith("error: ") for ln in errors) != 1 or not errors[-1].startswith("error: ")):
+        problems.append("not one error line")  # (warnings may come before it)
     if "Traceback" in err or "internal error" in err:
         problems.append("internal error")
     nxt = rmbuild(build_argv(inp, ws, not (ws / "build_state.json").is_file()))
