@@ -401,3 +401,20 @@ def test_localize_at_the_query_limit_fits_in_memory(mapped: Path, tmp_path: Path
     r = run_capped("localize", tmp_path / "q", "-w", mapped, "-o", tmp_path / "out.csv", "-q")
     assert r.code == 0 and r.peak_rss_mb < 1024, (r.err, r.peak_rss_mb)
     assert len(pd.read_csv(tmp_path / "out.csv")) == n
+
+
+def test_an_error_of_a_stage_without_a_place_names_the_workspace(mapped: Path, tmp_path: Path, capsys,
+                                                                  monkeypatch) -> None:
+    """make fuzz case extreme/11000833: true paths stretched 1000-fold made evaluate's surveyed map too large to
+    raster; the error was clean but named no file."""
+    import shutil
+
+    import rmbuild.radiomap.build as build
+
+    ws = tmp_path / "ws"
+    shutil.copytree(mapped, ws)
+    monkeypatch.setattr(build, "MAX_MAP_RASTER_CELLS", 10)
+    one_error(run_cli(capsys, "export-map", "-w", ws, "--force"),
+              rf"^error: {re.escape(str(ws))}: the map's nodes span .* at most 10 ")
+    # evaluate's own: its walks carry too few fixes to score the map
+    one_error(run_cli(capsys, "evaluate", "-w", ws, "--force"), rf"^error: {re.escape(str(ws))}: cannot align the map")
