@@ -39,6 +39,7 @@ run: $(STAMP)
 	@echo "  workspace:                              $(RUN_DIR)/workspace"
 	@echo "  stage reports:                          $(RUN_DIR)/workspace/*/report.json"
 	@echo "  radio map:                              $(RUN_DIR)/workspace/map/"
+	@echo "  the whole map for evo (one TUM file):   $(RUN_DIR)/workspace/map/evo/"
 	@echo "  HTML report:                            $(RUN_DIR)/workspace/report.html"
 	@echo "  rerun recording:                        $(RUN_DIR)/workspace/view.rrd  (open with: .venv/bin/rerun $(RUN_DIR)/workspace/view.rrd)"
 
@@ -53,8 +54,9 @@ run-real: $(STAMP)
 	@echo "results:"
 	@echo "  input (real traces + floor plan, MIT):  $(REAL_DATA)"
 	@echo "  workspace:                              $(REAL_DIR)/workspace"
-	@echo "  stage reports:                          $(REAL_DIR)/workspace/reports/*.json"
-	@echo "  aligned walks (TUM files for evo):      $(REAL_DIR)/workspace/optimize/"
+	@echo "  stage reports:                          $(REAL_DIR)/workspace/*/report.json"
+	@echo "  aligned walks (TUM files for evo):      $(REAL_DIR)/workspace/optimize/tum/"
+	@echo "  the whole map for evo (one TUM file):   $(REAL_DIR)/workspace/map/evo/"
 	@echo "  radio map:                              $(REAL_DIR)/workspace/map/"
 	@echo "  HTML report:                            $(REAL_DIR)/workspace/report.html"
 
@@ -69,7 +71,7 @@ bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.run_all
 
 ## make bench-real: ingest -> optimize -> export-map -> evaluate on every real floor with ground truth
-## (RMBUILD_DATASETS, default ../shared/datasets); bench/results/real.json and real.md.
+## (RMBUILD_DATASETS: the folder holding the full MS ILC 2.0 and IPIN 2023 data sets); bench/results/real.json, real.md.
 ## Options through BENCH_REAL_ARGS, e.g. BENCH_REAL_ARGS="--floors F1,F4 --out real_after"
 bench-real: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.bench_real $(BENCH_REAL_ARGS)

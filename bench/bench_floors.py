@@ -43,7 +43,7 @@ def compare(site_ws: Path, floor_ws: dict[str, Path]) -> dict:
 def _building(site_ws: Path) -> dict:
     """The building's evaluate totals as the code computes them now (the evaluate run may be older)."""
     from rmbuild.config import EvaluateConfig
-    from rmbuild.stages.floor_eval import floor_totals
+    from rmbuild.stages.building.evaluate import floor_totals
 
     rep = json.loads((site_ws / "building" / "evaluate.json").read_text())
     return floor_totals(site_ws, rep["floors"], EvaluateConfig())
@@ -53,7 +53,7 @@ def sensitivity(site_ws: Path) -> dict:
     """The floor hit rate for each variant of the classifier's constants (the others at their defaults)."""
     import rmbuild.localize.floor as fl
     from rmbuild.config import EvaluateConfig
-    from rmbuild.stages.floor_eval import floor_totals
+    from rmbuild.stages.building.evaluate import floor_totals
 
     rep = json.loads((site_ws / "building" / "evaluate.json").read_text())
     out: dict = {}
@@ -101,7 +101,7 @@ def change_delay(site_ws: Path, pairs: int = 120, seed: int = 0) -> dict:
 
     import rmbuild.localize.floor as fl
     from rmbuild.localize.base import Query
-    from rmbuild.stages.floor_eval import _floor_data, _refs
+    from rmbuild.stages.building.evaluate import _floor_data, _refs
 
     rep = json.loads((site_ws / "building" / "evaluate.json").read_text())
     floors = {n: site_ws / "floors" / n for n in rep["floors"]}
@@ -175,14 +175,14 @@ def changes_synthetic(seeds: range, preset: str = "default") -> dict:
 
 
 def split_synthetic(seeds: range, preset: str = "default") -> dict:
-    """The barometer + Wi-Fi split alone (:func:`rmbuild.ingest_floors.split_floors`, the simulated floor
+    """The barometer + Wi-Fi split alone (:func:`rmbuild.ingest.floors.split_floors`, the simulated floor
     columns dropped) on simulated three-floor buildings: per building, the share of steps on their true floor
     (the found floors named by their majority), the floors found, and the cut errors (steps)."""
     import numpy as np
     import pandas as pd
 
     from rmbuild.config.simulate import preset_config
-    from rmbuild.ingest_floors import split_floors
+    from rmbuild.ingest.floors import split_floors
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic.building import simulate_building
 
@@ -316,7 +316,7 @@ def frames_accuracy(scratch: Path, seeds: tuple[int, ...] = (11, 12), preset: st
 
     from rmbuild.geometry import align_se2
     from rmbuild.io.workspace import building_floors
-    from rmbuild.stages.floor_frames import floor_frames
+    from rmbuild.stages.building.frames import floor_frames
 
     out = {}
     for seed in seeds:

@@ -7,7 +7,7 @@ Test beds (the map is always *surveyed*: built from the map walks' reference pos
   synthetic / same device: the `default` preset (seed 7), 4 test walks on a device with k = 1, b = 0.
   synthetic / other device: the same walks and noise on a device φ = 1.25 ψ − 6 dB. Its offline fit:
       both devices stand at 60 spots on the test walks' tracks, 20 scans each, one session per spot and
-      device; :func:`rmbuild.localize.calibration.fit_device_model` on the per-(spot, AP) means.
+      device; :func:`rmbuild.baselines.calibration.fit_device_model` on the per-(spot, AP) means.
   ILC site1/F1 (dev floor): map from 4 of every 5 walks, the others are tests (evaluate's default split);
       reference positions = waypoints interpolated in time; phone PDR from the ILC reader.
   IPIN 2023 floor -2: map from the Samsung A5 (SM-A520F) walks, tests on the Galaxy S7 (SM-G930F) walks;
@@ -48,7 +48,7 @@ def _scenario(preset: str, test_device, n_test: int | None, cell_m: float, seed:
     from rmbuild.config.evaluate import EvaluateConfig
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import simulate
 
@@ -111,7 +111,7 @@ def standing_means(sd, cfg, spots_xy: np.ndarray, device, n_scans: int = 20, see
 
 def standing_fit(sd, cfg, spots_xy: np.ndarray, device, seed: int = 1, margins=(None,)):
     """(DeviceFit per margin (None = the default), OLS (k, b) on the same pairs) from :func:`standing_means`."""
-    from rmbuild.localize.calibration import FLOOR_MARGIN_DB, fit_device_model
+    from rmbuild.baselines.calibration import FLOOR_MARGIN_DB, fit_device_model
 
     x, y, floors = standing_means(sd, cfg, spots_xy, device, seed=seed)
     ok = np.isfinite(x) & np.isfinite(y)
@@ -146,12 +146,12 @@ def fit_study(draws: int = 8) -> dict:
 
 def read_real(folder: Path, fmt: str):
     """A real data set read with rmbuild's own reader and ingest (default [pdr] and [ingest] config)."""
-    from rmbuild.config import IngestConfig, PdrConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.config import IngestConfig
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats import choose_reader, expand_inputs
 
     files = expand_inputs([folder])
-    reader = choose_reader(files, fmt, PdrConfig())
+    reader = choose_reader(files, fmt)
     raw = reader.read(files, IngestConfig())
     ds, fp, summary = build_dataset(raw, IngestConfig(), source=reader.name)
     pdr = [n for n in summary.get("notes", []) if "PDR" in n or "pdr" in n]
@@ -171,8 +171,8 @@ def _stats(e: np.ndarray, n_unlocalized: int | None = None) -> dict:
 
 def run_one(name: str, rm, q, qxy, calib=None, cfg=None) -> tuple[np.ndarray | None, dict]:
     """One localizer on one case: (per-scan errors (n,) m or None when n/a, extras for the report)."""
+    from rmbuild.baselines.config import OfflineCalibrationConfig
     from rmbuild.config.evaluate import EvaluateConfig
-    from rmbuild.config.localize import OfflineCalibrationConfig
     from rmbuild.localize.base import make_localizer
 
     cfg = cfg or EvaluateConfig()
@@ -181,13 +181,15 @@ def run_one(name: str, rm, q, qxy, calib=None, cfg=None) -> tuple[np.ndarray | N
         return None, {"n/a": "no step events"}
     reg_name = name
     if name.endswith("@paper"):
-        cfg = dataclasses.replace(cfg, hist=dataclasses.replace(cfg.hist, scoring="mark", smooth_db=0.0))
+        hist = dataclasses.replace(cfg.baselines.hist, scoring="mark", smooth_db=0.0)
+        cfg = dataclasses.replace(cfg, baselines=dataclasses.replace(cfg.baselines, hist=hist))
         reg_name = name.split("@")[0]
     if name.startswith("offline_cal"):
         if calib is None:
             return None, {"n/a": "no offline fit (same device)"}
         base = name.split(":")[1] if ":" in name else "knn"
-        cfg = dataclasses.replace(cfg, offline_cal=OfflineCalibrationConfig(calib[0], calib[1], base))
+        cal = OfflineCalibrationConfig(calib[0], calib[1], base)
+        cfg = dataclasses.replace(cfg, baselines=dataclasses.replace(cfg.baselines, offline_cal=cal))
         reg_name = "offline_cal"
     t0 = time.perf_counter()
     loc = make_localizer(reg_name, cfg).fit(rm)
@@ -220,7 +222,7 @@ def synthetic_cases() -> dict:
     spots = qxy[rng.choice(np.flatnonzero(np.isfinite(qxy).all(axis=1)), 60, replace=False)]
     fit, ols = standing_fit(sd, cfg, spots, DEVICE)
     res = run_case(rm, q, qxy, (fit.k, fit.b))
-    from rmbuild.localize.calibration import calibrate_query
+    from rmbuild.baselines.calibration import calibrate_query
     from rmbuild.localize.knn import KnnLocalizer
 
     res["knn (true k, b)"] = _stats(np.hypot(*(KnnLocalizer().fit(rm).predict(calibrate_query(q, *DEVICE)) - qxy).T))
@@ -259,7 +261,7 @@ def ipin_case() -> dict:
     rm, q, qxy = surveyed_case(ds, fp.bssids, a5, s7)
     fits = ipin_route_fits(ds, fp, rm, a5, s7)
     # offline_cal: each test route's scans mapped with the fit from the other routes' S7 walks
-    from rmbuild.localize.calibration import calibrate_query
+    from rmbuild.baselines.calibration import calibrate_query
 
     rss = q.rss_dbm.copy()
     for route, f in fits.items():
@@ -287,7 +289,7 @@ def ipin_case() -> dict:
 
 def ipin_route_fits(ds, fp, rm, a5: list[str], s7: list[str]) -> dict:
     """Per test route (TrainingTrialNN): the S7-vs-A5 fit from the S7 walks of every other route."""
-    from rmbuild.localize.calibration import colocated_pairs, fit_device_model
+    from rmbuild.baselines.calibration import colocated_pairs, fit_device_model
 
     routes = sorted({w.split("_repetition")[0] for w in s7})
     fits = {}
@@ -333,8 +335,8 @@ def uji_map(rss: np.ndarray, xy: np.ndarray, bssids: np.ndarray):
 def uji_case() -> dict:
     if not UJI.is_dir():
         return {"unavailable": "uji-longterm not present"}
+    from rmbuild.baselines.calibration import colocated_pairs, fit_device_model
     from rmbuild.localize.base import Query
-    from rmbuild.localize.calibration import colocated_pairs, fit_device_model
 
     bssids = np.array([f"ap{j:03d}" for j in range(620)], dtype=object)
     m_rss, m_crd = read_uji(25, "trn01")
@@ -392,9 +394,9 @@ def table(cases: dict) -> list[str]:
 
 
 def latency(reps: int = 3) -> dict:
-    from rmbuild.config.localize import SlacConfig
+    from rmbuild.baselines.config import SlacConfig
+    from rmbuild.baselines.slac import SlacLocalizer
     from rmbuild.localize.base import make_localizer
-    from rmbuild.localize.slac import SlacLocalizer
 
     _, _, rm, q, qxy = _scenario("large", DEVICE, 2, 1.0)
     walks = q.walks()

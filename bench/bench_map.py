@@ -26,7 +26,7 @@ from rmbuild.viz.figures import coverage_figure, heatmaps_figure
 def _dataset(preset: str, seed: int):
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import simulate
 

@@ -69,7 +69,7 @@ def _subset(ds, fp, target_poses: int):
 
 def _load(preset: str, seed: int):
     from rmbuild.config import IngestConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.synthetic import preset_config, simulate
 
@@ -90,7 +90,7 @@ def _config(name: str):
     by random cross-walk pairs), full_graph (one node per step in the solve, for the chain reduction's
     time ratio)."""
     from rmbuild.config.optimize import OptimizeConfig, paper_config
-    from rmbuild.slam.testing import false_pairs
+    from tests.slam_venue import false_pairs
 
     if name == "paper":
         return paper_config(), None

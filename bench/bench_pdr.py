@@ -32,7 +32,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.config.simulate import CARRY_MODES
 from rmbuild.geometry import wrap as wrap_angle
-from rmbuild.ingest_core import derive_poses
+from rmbuild.ingest.core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader
 from rmbuild.pdr import run_pdr
@@ -74,7 +74,7 @@ def _walks(raw, min_marks: int) -> list[tuple[str, pd.DataFrame, pd.DataFrame]]:
 def ilc_floor(folder: Path, cfg: PdrConfig) -> dict:
     files = sorted((folder / "path_data_files").glob("*.txt*"))
     t, c = time.perf_counter(), time.process_time()
-    raw = MsftIlcReader(cfg).read(files, IngestConfig())
+    raw = MsftIlcReader().read(files, IngestConfig())
     reports, _ = derive_poses(raw, cfg)
     t_wall, t_cpu = time.perf_counter() - t, time.process_time() - c
     errs, walk_mean, ratios = [], [], []
@@ -96,7 +96,7 @@ def ilc_floor(folder: Path, cfg: PdrConfig) -> dict:
 def ipin_floor(folder: Path, cfg: PdrConfig) -> dict:
     files = sorted(folder.glob("*.txt*"))
     t = time.perf_counter()
-    raw = IpinReader(cfg).read(files, IngestConfig())
+    raw = IpinReader().read(files, IngestConfig())
     reports, _ = derive_poses(raw, cfg)
     t_wall = time.perf_counter() - t
     device = dict(zip(raw.walks["walk_id"], raw.walks["device_id"]))

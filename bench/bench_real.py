@@ -37,7 +37,9 @@ DEFAULT_SCRATCH = Path("/tmp/rmbuild-bench-real")
 FLOORS = {
     "site1/F1": ("msft-ilc20/data/site1/F1", "msft-ilc"),
     "site1/F2": ("msft-ilc20/data/site1/F2", "msft-ilc"),
+    "site1/B1": ("msft-ilc20/data/site1/B1", "msft-ilc"),
     "site2/B1": ("msft-ilc20/data/site2/B1", "msft-ilc"),
+    "site2/F1": ("msft-ilc20/data/site2/F1", "msft-ilc"),
     "site2/F4": ("msft-ilc20/data/site2/F4", "msft-ilc"),
     "site2/F6": ("msft-ilc20/data/site2/F6", "msft-ilc"),
     "ipin/-2": ("ipin2023/logs", "ipin"),
@@ -47,6 +49,8 @@ LINK_RADII_M, LINK_SHARED_M = (8.0, 12.0), 10.0  # "linkable": ≥ LINK_SHARED_M
 LINK_GAP_S = 60.0  # ... or the same device's next recording within this gap (starting within the radius)
 SHARED_RADIUS_M = 5.0  # "shares its path": a point of the true path within this distance of another walk's
 PATH_STEP_M = 0.5  # resampling step of the waypoint polylines (distance error ≤ a quarter of it)
+RIGHT_M = 8.0  # a linked walk "placed right": its mean waypoint error in the consensus frame is within this
+CONSENSUS_HYPOTHESES = 4000  # triples of linked walks tried for the consensus frame (all of them when fewer)
 WORSE_THAN_M = 10.0  # a linked walk "placed badly": its mean waypoint error after optimisation exceeds this
 #: per-walk columns that hold a predicted placement error (metres, larger = worse), in order of preference
 PREDICTED_ERROR_COLUMNS = ("predicted_error_m", "placement_error_m", "confidence_m", "predicted_error")
@@ -282,11 +286,81 @@ def waypoint_errors(ws: Path, linked: set[str]) -> pd.DataFrame:
     est_opt = at_fix_times(opt, fixes)
     v_opt = aligned_error_vectors(est_opt, truth, is_linked)
     df = pd.DataFrame({"walk_id": wid, "linked": is_linked, "err_raw": e_raw, "err_opt": np.linalg.norm(v_opt, axis=1),
-                       "dx_opt": v_opt[:, 0], "dy_opt": v_opt[:, 1],
+                       "dx_opt": v_opt[:, 0], "dy_opt": v_opt[:, 1], "ex": est_opt[:, 0], "ey": est_opt[:, 1],
+                       "tx": truth[:, 0], "ty": truth[:, 1],
                        # no fit: meaningful only when the back end put the walks in the building frame itself
                        "err_opt_unaligned": np.linalg.norm(est_opt - truth, axis=1)})
     df["err_all"] = np.where(df["linked"], df["err_opt"], df["err_raw"])
     return df[np.isfinite(df["err_raw"])].reset_index(drop=True)
+
+
+def consensus_errors(wp: pd.DataFrame, seed: int = 0) -> pd.Series:
+    """Per linked walk with waypoints: its mean waypoint error (m) in the one rigid frame that puts the most
+    linked walks within RIGHT_M of their waypoints. The frame is a RANSAC over triples of walks (each triple's
+    waypoints fitted rigidly, Umeyama; all triples when there are at most CONSENSUS_HYPOTHESES, else as many
+    drawn at random), the best refitted on its inlier walks until they no longer change: wrongly placed
+    walks or groups cannot drag it, as they drag a least-squares fit of the whole map."""
+    lk = wp[wp["linked"] & wp["ex"].notna()]
+    codes, ids = pd.factorize(lk["walk_id"])
+    n = len(ids)
+    if n == 0:
+        return pd.Series(dtype=float)
+    est, tru = lk[["ex", "ey"]].to_numpy(float), lk[["tx", "ty"]].to_numpy(float)
+    cnt = np.bincount(codes, minlength=n)
+
+    def per_walk(on: np.ndarray) -> np.ndarray:
+        m = on[codes]
+        if m.sum() < 2:
+            return np.full(n, np.inf)
+        r, t = fit_se2(est[m], tru[m])
+        return np.bincount(codes, np.linalg.norm(est @ r.T + t - tru, axis=1), n) / cnt
+
+    from itertools import combinations
+    from math import comb
+
+    if n <= 3:
+        hyps = [tuple(range(n))]
+    elif comb(n, 3) <= CONSENSUS_HYPOTHESES:
+        hyps = list(combinations(range(n), 3))
+    else:
+        rng = np.random.default_rng(seed)
+        hyps = [tuple(rng.choice(n, 3, replace=False)) for _ in range(CONSENSUS_HYPOTHESES)]
+    best, best_key = np.full(n, np.inf), (-1, 0.0)
+    for h in hyps:
+        on = np.zeros(n, bool)
+        on[list(h)] = True
+        e = per_walk(on)
+        ok = e <= RIGHT_M
+        key = (int(ok.sum()), -float(e[ok].sum()))
+        if key > best_key:
+            best, best_key = e, key
+    for _ in range(10):  # refit on the inlier walks while that keeps at least as many
+        inl = best <= RIGHT_M
+        e = per_walk(inl)
+        if (e <= RIGHT_M).sum() < inl.sum():
+            break
+        best = e
+        if np.array_equal(e <= RIGHT_M, inl):
+            break
+    return pd.Series(best, index=ids)
+
+
+def precision_block(per_walk: pd.DataFrame) -> dict:
+    """Walks placed right (consensus error ≤ RIGHT_M) among the linked walks with waypoints, the others'
+    median error, the same split by how each walk was placed, and the predicted error's rank correlation
+    with the consensus error."""
+    lk = per_walk[per_walk["linked"] & per_walk["err_consensus"].notna()]
+    right = lk["err_consensus"] <= RIGHT_M
+    out: dict = {"scored": len(lk), "right": int(right.sum()),
+                 "precision": round(float(right.mean()), 3) if len(lk) else None,
+                 "others_median_m": round(float(lk.loc[~right, "err_consensus"].median()), 1) if (~right).any()
+                 else None}
+    if "placement" in lk:
+        kinds = lk["placement"].fillna("").astype(str)
+        out["by_placement"] = {k: [int(right[kinds == k].sum()), int((kinds == k).sum())] for k in sorted(set(kinds))}
+    col = next((c for c in PREDICTED_ERROR_COLUMNS if c in lk), None)
+    out["rho_consensus"] = spearman(lk[col].to_numpy(float), lk["err_consensus"].to_numpy(float)) if col else None
+    return out
 
 
 def spearman(a: np.ndarray, b: np.ndarray) -> float | None:
@@ -319,6 +393,7 @@ def per_walk_table(ws: Path, wp: pd.DataFrame, walks: pd.DataFrame | None, share
     out["n_waypoints"] = out["walk_id"].map(wp.groupby("walk_id").size()).fillna(0).astype(int)
     out = out.join(g, on="walk_id")
     out["shared_path_share"] = out["walk_id"].map(shared)
+    out["err_consensus"] = out["walk_id"].map(consensus_errors(wp))
     if walks is not None:
         keep = [c for c in ("placement", "confidence", "component", "n_cross_pairs", "n_partner_walks",
                             *PREDICTED_ERROR_COLUMNS) if c in walks]
@@ -424,6 +499,7 @@ def score_workspace(ws: Path) -> dict:
                               "optimized_unlinked_at_raw": nested(rep, "optimized", "landmark_error_unlinked_at_raw_m",
                                                                   "mean"),
                               "gauge": rep.get("gauge"), "fitted_on": nested(rep, "metrics_alignment", "fitted_on")},
+        "precision": precision_block(pw),
         "knn": knn_block(ev),
         "confidence_rank": confidence_rank(pw),
         "vicinity_pairs": pairs_block(ws),
@@ -459,34 +535,36 @@ def _f(v, fmt: str = "{:.1f}") -> str:
     return "–" if v is None or (isinstance(v, float) and not np.isfinite(v)) else fmt.format(v)
 
 
+def _pct(v: float | None) -> float | None:
+    return None if v is None else 100 * v
+
+
 def md_row(r: dict) -> str:
     if "skipped" in r or "error" in r:
-        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 11
-    n, lm, rl, k = r["walks"], r["landmark_m"], r["report_landmark_m"], r["knn"]
+        return f"| {r['floor']} | {r.get('skipped') or r.get('error')} |" + " |" * 10
+    n, lm, k, pr = r["walks"], r["landmark_m"], r["knn"], r.get("precision") or {}
     conf = r["confidence_rank"]
     st = r["stages"]
+    kinds = ", ".join(f"{kind or '?'} {a}/{b}" for kind, (a, b) in (pr.get("by_placement") or {}).items())
     cells = [
-        r["floor"], str(n), f"{r['shared_path_walks']} ({100 * r['shared_path_walks'] / max(n, 1):.0f} %)",
-        f"{r['linked']} ({r['linked_pct']:.0f} %)",
-        " / ".join(f"{v} ({100 * v / max(n, 1):.0f} %)" for v in r["linkable"].values()) if "linkable" in r else "–",
+        r["floor"], str(n), f"{r['linked']} ({r['linked_pct']:.0f} %)",
+        f"{pr.get('right', '–')} / {pr.get('scored', '–')} ({_f(_pct(pr.get('precision')), '{:.0f}')} %)",
+        _f(pr.get("others_median_m")), kinds or "–",
         f"{_f(nested(lm, 'raw', 'mean'))} → {_f(nested(lm, 'all_walks_unlinked_at_raw', 'mean'))}",
-        f"{_f(rl['raw'])} → {_f(rl.get('optimized_unlinked_at_raw') or rl['optimized'])}",
         f"{_f(nested(lm, 'linked_walks', 'mean'))} / {_f(nested(lm, 'linked_walks', 'median'))}",
-        f"{_f(nested(r, 'linked_error_split', 'offset_m'))} / {_f(nested(r, 'linked_error_split', 'shape_m'))}",
-        f"{lm['linked_worse_than_raw']} ({lm[f'linked_over_{WORSE_THAN_M:g}m']})",
         f"{_f(k['built_median_m'])} / {_f(k['surveyed_median_m'])} ({_f(k['ratio'], '{:.2f}')}×)",
-        f"{_f(conf['rho'], '{:+.2f}')} ({conf['column'] or '–'})",
+        f"{_f(conf['rho'], '{:+.2f}')} / {_f(pr.get('rho_consensus'), '{:+.2f}')}",
         " / ".join(_f(nested(st, s, "s"), "{:.0f}") for s in STAGES),
         _f(max((nested(st, s, "peak_mb") or 0) for s in STAGES), "{:.0f}"),
     ]
     return "| " + " | ".join(cells) + " |"
 
 
-HEADER = ("| floor | walks | walks sharing ≥ half their path (5 m) | linked | linkable by truth, 8 / 12 m | "
-          "landmark error all walks, raw → optimised (unlinked at raw) m | same, rmbuild's report m | "
-          "linked walks mean / median m | linked walks' offset / shape m | linked walks worse than raw (> 10 m) | "
-          "kNN median built / surveyed m | "
-          "confidence vs error ρ | time ingest / optimize / export-map / evaluate s | peak MB |\n|" + "---|" * 14)
+HEADER = ("| floor | walks | linked | placed right / linked walks scored (precision) | the others' median error m | "
+          "by placement: right / scored | landmark error all walks, raw → optimised (unlinked at raw) m | "
+          "linked walks mean / median m (one fit) | kNN median built / surveyed m | "
+          "predicted error vs error ρ (one fit / consensus) | time ingest / optimize / export-map / evaluate s | "
+          "peak MB |\n|" + "---|" * 12)
 
 NOTES = """
 - **Truth**: the surveyed waypoints (ILC `TYPE_WAYPOINT`, IPIN `POSI`), for scoring only. A walk's true path is
@@ -499,6 +577,12 @@ NOTES = """
   by being the same device's next recording (gap ≤ 60 s) that truly starts within 8 m (12 m) of where the last
   one ended. Wi-Fi vicinity (a band of ~6 m) links a walk outside the 8 m group only through weak, long-range
   evidence; the 12 m group is a loose upper bound.
+- **Placed right**: a linked walk whose mean waypoint error is within 8 m in the *consensus frame*: the one
+  rigid frame that puts the most linked walks within 8 m (a RANSAC over triples of linked walks, each triple's
+  waypoints fitted rigidly, the best refitted on its inlier walks): wrongly placed walks cannot drag it as
+  they drag one fit of the whole map. *Precision*: placed right / linked walks with waypoints. *The others*:
+  the median consensus error of the linked walks not placed right. *By placement*: the same per
+  `optimize/walks.parquet` `placement` (how the walk was placed).
 - **Landmark error** (m, mean over waypoints): the walk's position at each waypoint time, linear between its
   poses, after **one** least-squares rigid SE(2) fit (Umeyama, no scale) for all walks together — as
   `rmbuild evaluate`/`optimize` score it. Raw: raw PDR poses, fit on all walks' waypoints. Optimised: the
@@ -512,9 +596,9 @@ NOTES = """
   of its mean error vector) and its shape (the mean error left once that offset is removed).
 - **kNN**: median localisation error of `evaluate`'s kNN on its held-out walks with the map built from the
   optimised poses vs the map from surveyed positions.
-- **ρ**: Spearman rank correlation over linked walks between the per-walk column named in brackets and the
-  walk's real mean waypoint error (a predicted error in metres should give ρ ≥ +0.5; a higher-is-better
-  `confidence` should give a negative ρ).
+- **ρ**: Spearman rank correlation over linked walks between the predicted error (`predicted_error_m`) and the
+  walk's real mean waypoint error, after one fit of all linked walks / in the consensus frame (should be
+  ≥ +0.5).
 - **Time**: wall-clock of each CLI subprocess; peak MB is the largest of the stages' own peak RSS.
 """
 

@@ -2,7 +2,7 @@
 Writes bench/results/uiloc.json. Run: ``nice -n 10 python -m bench.bench_uiloc`` (about a minute).
 
 1. Self-building map: the map walks' scans, each at its reference position, folded in with
-   :func:`rmbuild.radiomap.selfbuild.merge_fingerprints` at merge radius 0 (every scan its own RP), 1 m (the
+   :func:`rmbuild.baselines.selfbuild.merge_fingerprints` at merge radius 0 (every scan its own RP), 1 m (the
    paper) and 2 m, beside today's surveyed 2 m grid map of the same walks; kNN (K = 15) on the test walks'
    scans. Two venues: the `default` preset (seed 7, test device k = 1, b = 0) and the same venue walked by
    three times as many walks (18 long, 12 short).
@@ -26,7 +26,7 @@ def _case(n_long: int, n_short: int):
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
     from rmbuild.evaluate.localization import query_reference_xy, split_walks
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.localize.base import Query
     from rmbuild.synthetic import simulate
@@ -55,8 +55,8 @@ def _err(p: np.ndarray, qxy: np.ndarray) -> dict:
 
 
 def selfbuild_study() -> dict:
+    from rmbuild.baselines.selfbuild import merge_fingerprints
     from rmbuild.localize.knn import KnnLocalizer
-    from rmbuild.radiomap.selfbuild import merge_fingerprints
 
     out = {}
     for label, nl, ns in (("default", 6, 4), ("default, 3x the walks", 18, 12)):
@@ -76,7 +76,7 @@ def selfbuild_study() -> dict:
 
 
 def fusion_parts() -> dict:
-    from rmbuild.localize.uiloc import UilocLocalizer, fit_path_loss
+    from rmbuild.baselines.uiloc import UilocLocalizer, fit_path_loss
 
     sd, rm, q, qxy, _, _, _ = _case(6, 4)
     loc = UilocLocalizer().fit(rm)

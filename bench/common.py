@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 import platform
 import resource
-import time
-from contextlib import contextmanager
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -24,13 +22,6 @@ def machine() -> dict:
     # jobs on the machine) are not comparable, ratios within one run are
     return {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform(),
             "load_1min": round(os.getloadavg()[0], 2)}
-
-
-@contextmanager
-def stopwatch(out: dict, key: str):
-    t0 = time.perf_counter()
-    yield
-    out[key] = round(time.perf_counter() - t0, 4)
 
 
 def write_result(name: str, data: dict) -> Path:

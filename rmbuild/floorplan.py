@@ -282,7 +282,8 @@ def _signed_distance(walkable, bounds, res: float, margin: float):
 
 
 def to_geojson(plan: FloorPlan) -> dict:
-    """The plan in local metres as GeoJSON (the workspace's ``data/floorplan.geojson``): the outline
+    """The plan in local metres as GeoJSON (the workspace's ``data/floorplan.local.json``: GeoJSON-shaped, but
+    in metres, so not RFC 7946 GeoJSON): the outline
     (``"type": "floor"``), the walkable space (``"walkable": true``) and the georeference, which
     :func:`from_local_geojson` reads back."""
 

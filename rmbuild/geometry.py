@@ -74,11 +74,6 @@ def increments(p: np.ndarray) -> np.ndarray:
     return between(p[:-1], p[1:])
 
 
-def transform_points(T: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Points (n, 2) mapped by the rigid transform T = (x, y, theta) (3,)."""
-    return np.asarray(xy, dtype=float) @ rot(float(T[2])).T + np.asarray(T[:2], dtype=float)
-
-
 def align_se2(
     src_xy: np.ndarray, dst_xy: np.ndarray, weights: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:

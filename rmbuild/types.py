@@ -101,16 +101,6 @@ class Fingerprints:
     def __len__(self) -> int:
         return len(self.node)
 
-    @property
-    def detected(self) -> np.ndarray:
-        return ~np.isnan(self.rss_dbm)
-
-    def filled(self, fill_dbm: float = -110.0) -> np.ndarray:
-        """float32 (n, n_ap) with missing readings replaced by ``fill_dbm`` (Gu et al. 2017)."""
-        out = self.rss_dbm.copy()
-        out[np.isnan(out)] = fill_dbm
-        return out
-
     def subset(self, mask: np.ndarray) -> Fingerprints:
         """Rows where ``mask`` (bool over rows) is true."""
         return Fingerprints(self.node[mask], self.bssids, self.rss_dbm[mask], self.count[mask])

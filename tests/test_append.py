@@ -63,10 +63,10 @@ def test_append_keeps_the_floor_plan(parts: dict[str, Path], tmp_path: Path, cap
     (tmp_path / "plan.geojson").write_text(json.dumps({**plan_geojson(venue), "frame": "local_m"}))
     ws = tmp_path / "ws"
     assert run_cli(capsys, "ingest", parts["old"], "-w", ws, "-q", "--floorplan", tmp_path / "plan.geojson").code == 0
-    before = (ws / "data" / "floorplan.geojson").read_text()
+    before = (ws / "data" / "floorplan.local.json").read_text()
     r = run_cli(capsys, "ingest", "--append", parts["new"], "-w", ws, "-q")
     assert r.code == 0, r.err
-    assert (ws / "data" / "floorplan.geojson").read_text() == before
+    assert (ws / "data" / "floorplan.local.json").read_text() == before
     report = Workspace.open(ws).read_report("ingest")
     assert report["floorplan"]["frame_check"]["fixes"] == len(Workspace.open(ws).read_dataset().fixes)
 

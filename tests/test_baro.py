@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.ingest_floors import split_floors
+from rmbuild.ingest.floors import split_floors
 from rmbuild.io.formats.base import RawInput
 from rmbuild.pdr.baro import M_PER_HPA, floor_changes
 

@@ -11,10 +11,9 @@ import pytest
 from cli_util import run_cli
 from conftest import make_input_tables, write_tables
 
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import PdrConfig
+from rmbuild.config.ingest import IngestConfig, MsftIlcConfig
 from rmbuild.errors import InputError
-from rmbuild.ingest_core import build_dataset
+from rmbuild.ingest.core import build_dataset
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
 from rmbuild.io.formats.rmbuild_schema import RmbuildSchemaReader
@@ -55,14 +54,14 @@ def test_ilc_repeated_beacon_kept_once_and_fast_slow_paths_agree(tmp_path):
     later = BEACON.replace("1574559498333", "1574559499000").replace("-81", "-77")
     lines[i + 1:i + 1] = [BEACON.replace("-81", "-90"), later]   # the same (time, MAC) again, then a later one
     p = _write(tmp_path, lines, "t.txt")
-    tr = parse_trace(p, PdrConfig())
+    tr = parse_trace(p, MsftIlcConfig())
     assert list(tr.ble["rssi_dbm"]) == [-81.0, -77.0] and tr.n_ble_dup == 1
     assert list(tr.ble_lines) == [i + 1, i + 3]
     # a line the fast parser cannot take (a comment in the data) sends the whole file through the slow one
     lines.insert(5, "not a trace line")
     q = _write(tmp_path, lines, "bad.txt")
     with pytest.raises(InputError, match="not a Microsoft ILC trace line"):
-        parse_trace(q, PdrConfig())
+        parse_trace(q, MsftIlcConfig())
 
 
 @pytest.mark.parametrize("edit, message", [
@@ -282,7 +281,7 @@ def test_real_ipin_logfiles_have_six_beacons(shared_datasets: Path):
 def test_real_ilc_site_split_keeps_ble_per_floor(shared_datasets: Path, tmp_path):
     site = shared_datasets / "msft-ilc20" / "data" / "site2"
     files = [f for fl in ("F4", "B1") for f in sorted((site / fl / "path_data_files").glob("*.txt.gz"))[:3]]
-    from rmbuild.ingest_floors import split_floors
+    from rmbuild.ingest.floors import split_floors
 
     raw = MsftIlcReader().read(files, IngestConfig())
     floors = split_floors(raw)

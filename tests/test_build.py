@@ -141,7 +141,7 @@ def _records(ws: Path) -> dict[str, str]:
 def test_a_rerun_redoes_only_what_changed(tmp_path: Path) -> None:
     from conftest import make_input_tables
 
-    from rmbuild.stages.build_state import floor_is_current, read_state
+    from rmbuild.stages.building.state import floor_is_current, read_state
 
     inputs = _split_by_floor(tmp_path / "in", make_input_tables(n_walks=4))
     ws, cfgs = tmp_path / "ws", _configs("serial")
@@ -269,7 +269,7 @@ def test_venues_file_errors(tmp_path: Path, text: str, problem: str) -> None:
 def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
     import logging
 
-    from rmbuild.stages.floor_task import captured_warnings
+    from rmbuild.stages.building.task import captured_warnings
 
     log = logging.getLogger("rmbuild.stages.optimize")
     with caplog.at_level(logging.INFO, logger="rmbuild"), captured_warnings() as warnings:
@@ -292,8 +292,8 @@ def test_a_local_cluster_started_early_is_warmed_and_fitted_to_the_floors() -> N
     they start, and a cluster of the default size lets its extra workers go once the floors are known."""
     import time
 
+    from rmbuild.stages.building.task import import_floor_modules
     from rmbuild.stages.dask_run import executor
-    from rmbuild.stages.floor_task import import_floor_modules
 
     with executor(parse_scheduler("local:2"), None, warm=import_floor_modules) as run:
         out = run(_pid_after_warm_up, {"a": (), "b": ()}, None)

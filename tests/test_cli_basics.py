@@ -31,6 +31,50 @@ def test_each_command_has_help(name: str, capsys) -> None:
     assert r.code == 0 and "Usage:" in r.out, r.err
 
 
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_help_offers_rerun_only_where_the_command_takes_it(name: str, capsys) -> None:
+    from rmbuild.cli import load_command
+
+    takes = any("--rerun" in getattr(p, "opts", ()) for p in load_command(name).params)
+    r = run_cli(capsys, name, "--help")
+    assert ("--rerun" in r.out) == takes, name
+    if name == "build":
+        assert not takes
+
+
+def test_a_mistyped_command_gets_a_suggestion(capsys) -> None:
+    r = run_cli(capsys, "optimise", "-w", "x")
+    assert r.code == 2 and "No such command 'optimise'. Did you mean 'optimize'?" in r.err
+    assert len(r.err.strip().splitlines()) == 1
+    r = run_cli(capsys, "expor-map")
+    assert r.code == 2 and "Did you mean 'export-map'?" in r.err
+    r = run_cli(capsys, "frobnicate")
+    assert r.code == 2 and "No such command 'frobnicate'." in r.err and "Did you mean" not in r.err
+
+
+def test_optimize_summary_counts_linked_walks_first(capsys) -> None:
+    """With unlinked walks the first optimised error is the linked walks' (an unlinked walk's frame is
+    arbitrary), and the linked count says why it is below the progress bar's."""
+    from rmbuild.cli.optimize import _summary
+
+    lm = {"mean": 107.58, "max": 272.36, "n": 513}
+    r = {"walks": 102, "poses": 5709, "factors": {"odometry": 5607, "vicinity": 1915, "prior": 6},
+         "time_s": {"stage_total": 10.7}, "gauge": "floorplan", "linked_walks": 54,
+         "refuted_walks": ["a", "b", "c", "d"], "anchored_only_walks": 0,
+         "metrics_alignment": {"fitted_on": "linked walks", "walks": 54},
+         "raw": {"ate_m": None, "landmark_error_m": {"mean": 53.69, "max": 104.8, "n": 513}},
+         "optimized": {"ate_m": None, "landmark_error_m": lm,
+                       "landmark_error_fitted_walks_m": {"mean": 8.9, "max": 30.08, "n": 258},
+                       "landmark_error_unlinked_at_raw_m": {"mean": 35.58, "max": 100.65, "n": 513}}}
+    capsys.readouterr()
+    _summary(r)
+    out = capsys.readouterr().out
+    first = next(line for line in out.splitlines() if "optimized" in line and "error" in line)
+    assert "8.90 m" in first and "54 linked walks" in first and "107.58" not in out
+    assert "linked into the map: 54 of 102 walks; the RF check then refuted 4" in out
+    assert out.index("optimized landmark") < out.index("unlinked at their raw placement")
+
+
 def test_a_broken_command_module_is_an_error(capsys, monkeypatch) -> None:
     """A command whose module fails to import is listed and fails loudly, never silently disappears."""
     from rmbuild import cli as cli_mod

@@ -60,10 +60,14 @@ def test_file_layers(tmp_path: Path) -> None:
         load_stage_config("ingest", p)
 
 
+def _settings(doc: dict) -> int:
+    return sum(_settings(v) if isinstance(v, dict) else 1 for v in doc.values())
+
+
 def test_config_command_prints_a_file_that_loads_back(tmp_path: Path, capsys) -> None:
     from cli_util import run_cli
 
-    r = run_cli(capsys, "config")
+    r = run_cli(capsys, "config", "--all")
     assert r.code == 0
     doc = tomllib.loads(r.out)
     assert set(doc) == set(SECTIONS)
@@ -75,6 +79,79 @@ def test_config_command_prints_a_file_that_loads_back(tmp_path: Path, capsys) ->
     assert r.code == 2 and "'nope' is not one of" in r.err and len(r.err.strip().splitlines()) == 1
     r = run_cli(capsys, "config", "--stage", "ingest,map", "--stage", "pdr,ingest")  # comma and repeat
     assert r.code == 0 and [k for k in tomllib.loads(r.out)] == ["ingest", "map", "pdr"]
+
+
+def test_config_command_shows_the_user_settings_by_default(tmp_path: Path, capsys) -> None:
+    """`rmbuild config` prints at most 60 settings (none of the simulator's or the baselines'), a file that
+    loads back to the defaults; `--all` prints every one of the 200-odd."""
+    from cli_util import run_cli
+
+    r = run_cli(capsys, "config")
+    assert r.code == 0
+    doc = tomllib.loads(r.out)
+    assert 30 <= _settings(doc) <= 60
+    assert "simulate" not in doc and "baselines" not in doc["evaluate"] and "--all" in r.out
+    assert doc["optimize"]["odometry"]["mu"] == SECTIONS["optimize"]().odometry.mu
+    (tmp_path / "user.toml").write_text(r.out)
+    for name in doc:
+        assert load_stage_config(name, tmp_path / "user.toml") == SECTIONS[name]()
+    everything = tomllib.loads(run_cli(capsys, "config", "--all").out)
+    assert _settings(everything) > 200 and "slac" in everything["evaluate"]["baselines"]
+    only = tomllib.loads(run_cli(capsys, "config", "--stage", "simulate").out)
+    assert list(only) == ["simulate"] and _settings(only) > 60
+
+
+def test_user_settings_name_real_settings() -> None:
+    """Each key the default view lists exists (a renamed setting must be renamed there too)."""
+    import dataclasses
+
+    from rmbuild.config.user import USER_SETTINGS
+
+    for section, keys in USER_SETTINGS.items():
+        for key in keys:
+            obj = SECTIONS[section]()
+            for part in key.split("."):
+                assert part in {f.name for f in dataclasses.fields(obj)}, f"{section}.{key}"
+                obj = getattr(obj, part)
+            assert not dataclasses.is_dataclass(obj), f"{section}.{key} is a table, not a setting"
+
+
+@pytest.mark.parametrize(("text", "old", "new"), [
+    ("[pdr]\nstep_length_m = 0.7\n[pdr.ipin]\nuse_imui = false\n", "pdr.ipin", "ingest.ipin"),
+    ("[pdr.msft_ilc]\nmax_wifi_age_s = 5.0\n", "pdr.msft_ilc", "ingest.msft_ilc"),
+    ("[evaluate]\nsplit_every = 4\n\n[evaluate.slac]\nseed = 3\n", "evaluate.slac", "evaluate.baselines.slac"),
+])
+def test_a_moved_table_is_a_one_line_error_naming_its_new_place(text: str, old: str, new: str, tmp_path: Path,
+                                                                capsys) -> None:
+    from cli_util import run_cli
+
+    p = tmp_path / "old.toml"
+    p.write_text(text)
+    r = run_cli(capsys, "config", "--config", p)
+    assert r.code == 2 and len(r.err.strip().splitlines()) == 1
+    assert f"[{old}] is now [{new}]" in r.err and f"{p}:{text.splitlines().index(f'[{old}]') + 1}" in r.err
+
+
+def test_a_workspace_config_written_before_the_move_still_reads() -> None:
+    """data/config.toml of a workspace ingested by an earlier rmbuild keeps its IPIN origin."""
+    from rmbuild.config import load_stage_config_text
+
+    old = "[ingest]\nattach = 'nearest'\n\n[pdr]\nstep_length_m = 0.7\n\n[pdr.ipin]\norigin_lat_deg = 49.5\n" \
+          "origin_lon_deg = 11.1\n"
+    ing = load_stage_config_text("ingest", old, "data/config.toml")
+    assert ing.attach == "nearest" and (ing.ipin.origin_lat_deg, ing.ipin.origin_lon_deg) == (49.5, 11.1)
+    assert load_stage_config_text("pdr", old, "data/config.toml").step_length_m == 0.7
+
+
+def test_simulate_prints_its_own_settings(capsys) -> None:
+    from cli_util import run_cli
+
+    tiny = tomllib.loads(run_cli(capsys, "simulate", "--print-config", "--preset", "tiny", "--seed", "3").out)
+    default = tomllib.loads(run_cli(capsys, "simulate", "--print-config").out)
+    assert tiny["simulate"]["seed"] == 3 and default["simulate"]["seed"] == 7
+    assert tiny["simulate"]["venue"] != default["simulate"]["venue"]
+    r = run_cli(capsys, "simulate")
+    assert r.code == 2 and "OUT_DIR" in r.err
 
 
 # ------------------------------------------------------------------------------- ranges and file errors
@@ -101,7 +178,8 @@ def test_configs_built_in_python_are_held_to_the_ranges() -> None:
     with pytest.raises(ValueError, match=r"solve.outer_iterations: 0 is outside its range \[1, 100\]"):
         bad.validate()
     ev = SECTIONS["evaluate"]()
-    bad = dataclasses.replace(ev, pfl=dataclasses.replace(ev.pfl, n_particles=10**9))
+    pfl = dataclasses.replace(ev.baselines.pfl, n_particles=10**9)
+    bad = dataclasses.replace(ev, baselines=dataclasses.replace(ev.baselines, pfl=pfl))
     with pytest.raises(ValueError, match="pfl.n_particles"):
         bad.validate()
 

@@ -15,7 +15,7 @@ import pytest
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.evaluate.trajectory import interpolate_xy
 from rmbuild.geometry import align_se2
-from rmbuild.ingest_core import build_dataset
+from rmbuild.ingest.core import build_dataset
 from rmbuild.io.formats import choose_reader, expand_inputs
 
 DATASETS = Path(__file__).resolve().parents[1] / "datasets"

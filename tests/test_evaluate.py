@@ -225,7 +225,7 @@ def test_bad_input():
 def test_on_simulated_tiny_venue():
     sim = pytest.importorskip("rmbuild.synthetic")
     from rmbuild.config.ingest import IngestConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
 
     sd = sim.simulate(sim.preset_config("tiny", 3))

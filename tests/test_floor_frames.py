@@ -1,4 +1,4 @@
-"""Floors stacked by their transitions (rmbuild/stages/floor_frames.py): the frames' transform from the places
+"""Floors stacked by their transitions (rmbuild/stages/building/frames.py): the frames' transform from the places
 where walks changed floor, chained from the reference floor."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rmbuild.stages import floor_frames as ff
+from rmbuild.stages.building import frames as ff
 
 
 def _rot(deg: float) -> np.ndarray:

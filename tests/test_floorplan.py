@@ -48,7 +48,7 @@ def test_the_map_lands_in_the_plans_frame():
     from rmbuild.config import IngestConfig
     from rmbuild.config.optimize import OptimizeConfig
     from rmbuild.evaluate.trajectory import trajectory_metrics
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.slam import optimize
     from rmbuild.synthetic import preset_config, simulate
@@ -108,7 +108,7 @@ def test_ingest_keeps_the_plan_and_optimize_uses_it_unless_told_not_to(tmp_path,
     ws = tmp_path / "ws"
     res = run_cli(capsys, "ingest", sim, "-w", ws, "--floorplan", tmp_path / "plan.geojson")
     assert res.code == 0, res.err
-    assert (ws / "data" / "floorplan.geojson").is_file() and "floor plan" in res.out
+    assert (ws / "data" / "floorplan.local.json").is_file() and "floor plan" in res.out
     res = run_cli(capsys, "optimize", "-w", ws, "-q")
     assert res.code == 0, res.err
     report = json.loads((ws / "optimize" / "report.json").read_text())
@@ -182,3 +182,59 @@ def test_export_map_writes_the_cells_in_wgs84_when_the_plan_has_lon_lat(tmp_path
     uji = pd.read_csv(bare / "map" / "radiomap_uji.csv")
     table = pd.read_parquet(bare / "map" / "cells.parquet")
     assert (uji["LONGITUDE"] == table["x_m"]).all() and (uji["LATITUDE"] == table["y_m"]).all()
+
+
+def _rfc7946_problems(doc: dict) -> list[str]:
+    """What keeps ``doc`` from being RFC 7946 GeoJSON as far as a GIS reads it: a FeatureCollection without
+    the removed "crs" member, positions WGS84 lon/lat."""
+    out = []
+    if doc.get("type") != "FeatureCollection":
+        out.append("not a FeatureCollection")
+    if "crs" in doc:
+        out.append("has a crs member (removed by RFC 7946)")
+    for f in doc.get("features", []):
+        for lon, lat in (p[:2] for p in _positions(f.get("geometry", {}).get("coordinates", []))):
+            if not (-180 <= lon <= 180 and -90 <= lat <= 90):
+                return out + [f"position {lon}, {lat} is not lon/lat"]
+    return out
+
+
+def _positions(c):
+    if c and isinstance(c[0], (int, float)):
+        return [c]
+    return [p for sub in c for p in _positions(sub)]
+
+
+def test_every_geojson_a_workspace_holds_is_rfc7946(tmp_path, capsys):
+    """The plan in local metres is kept as data/floorplan.local.json (GeoJSON-shaped, metres: not GeoJSON);
+    every *.geojson the stages write has WGS84 positions. A workspace written before, with the plan in
+    data/floorplan.geojson, is still read."""
+    pytest.importorskip("gtsam")
+    import shutil
+
+    from rmbuild.io.workspace import Workspace
+    from rmbuild.synthetic.venue import plan_geojson
+    from tests.cli_util import run_cli
+
+    sim = tmp_path / "sim"
+    assert run_cli(capsys, "simulate", sim, "--preset", "tiny", "--seed", "1", "-q").code == 0
+    plan = {**plan_geojson(json.loads((sim / "truth" / "venue.json").read_text())), "frame": "local_m"}
+    (tmp_path / "plan.geojson").write_text(json.dumps(plan))
+    ws = tmp_path / "ws"
+    for args in (["ingest", sim, "-w", ws, "--floorplan", tmp_path / "plan.geojson"], ["optimize", "-w", ws],
+                 ["export-map", "-w", ws]):
+        assert run_cli(capsys, *args, "-q").code == 0
+    local = json.loads((ws / "data" / "floorplan.local.json").read_text())
+    assert local["frame"] == "local_m" and not list((ws / "data").glob("*.geojson"))  # metres: not .geojson
+    assert _rfc7946_problems({**local, "features": [{"geometry": {"coordinates": [[500.0, 300.0]]}}]})
+    for p in ws.rglob("*.geojson"):
+        assert _rfc7946_problems(json.loads(p.read_text())) == [], p
+    # a workspace an earlier rmbuild wrote: the plan under its old name, recorded so in the ingest record
+    old = tmp_path / "old"
+    shutil.copytree(ws, old)
+    (old / "data" / "floorplan.local.json").rename(old / "data" / "floorplan.geojson")
+    record = old / "data" / "stage.json"
+    rec = json.loads(record.read_text())
+    rec["files"]["data/floorplan.geojson"] = rec["files"].pop("data/floorplan.local.json")
+    record.write_text(json.dumps(rec))
+    assert Workspace.open(old).read_json("data.floorplan")["features"] == local["features"]

@@ -61,7 +61,7 @@ def test_optimize_refuses_a_plan_turned_against_the_compass(venue):
     pytest.importorskip("gtsam")
     from rmbuild.config import IngestConfig
     from rmbuild.config.optimize import OptimizeConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.slam import optimize
 
@@ -84,7 +84,7 @@ def test_optimize_refuses_a_plan_where_the_map_fits_two_places(venue):
 
     from rmbuild.config import IngestConfig
     from rmbuild.config.optimize import OptimizeConfig
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.slam import optimize
 
@@ -112,7 +112,7 @@ def test_a_plan_and_anchors_together_keep_the_anchors_frame(venue):
     from rmbuild.config import IngestConfig
     from rmbuild.config.optimize import OptimizeConfig
     from rmbuild.evaluate.trajectory import trajectory_metrics
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.slam import optimize
 

@@ -17,7 +17,7 @@ from conftest import SHARED_DATASETS, make_input_tables, write_tables
 from rmbuild.config import EvaluateConfig, IngestConfig, MapConfig, OptimizeConfig
 from rmbuild.config.simulate import preset_config
 from rmbuild.errors import InputError
-from rmbuild.ingest_floors import floor_level, split_floors
+from rmbuild.ingest.floors import floor_level, split_floors
 from rmbuild.io.formats import choose_reader, expand_inputs
 from rmbuild.io.workspace import building_floors, building_report_path
 from rmbuild.stages import evaluate, export_map, ingest, optimize, simulate
@@ -168,12 +168,49 @@ def test_cli_on_a_building(building: dict[str, Path], tmp_path: Path, capsys: py
     assert r.code == 0, r.err
     page = (tmp_path / "b.html").read_text()
     assert "floor F1" in page and "floor F2" in page and "Floor hit rate" in page
-    assert (ws / "floors" / "F2" / "report.html").is_file()
+    # the per-floor table evaluate prints, with its figures, and each floor's page beside the building's
+    rep = json.loads(building_report_path(ws, "evaluate").read_text())
+    median = rep["floors"]["F2"]["maps"]["built"]["knn"]["median"]
+    assert "Localization per floor" in page and f"<td class=\"num\">{median:.2f}</td>" in page
+    assert 'href="b_floors/F2.html"' in page and (tmp_path / "b_floors" / "F2.html").is_file()
+    assert (tmp_path / "b_floors" / "F2_figures" / "walks.png").is_file()
+    assert not (ws / "floors" / "F2" / "report.html").exists() and not (ws / "report.html").exists()
     r = run_cli(capsys, "evaluate", "-w", ws, "--floor", "F1", "--force")
     assert r.code == 0, r.err
     assert "floor F1:" in r.out and "floor hit rate" in r.out and "floor F2:" not in r.out
     r = run_cli(capsys, "optimize", "-w", ws, "--rerun", tmp_path / "x.rrd", "--force")
     assert r.code == 2 and "--floor" in r.err
+
+
+def _building_with_walks(base: Path, keep_on_f2: int) -> Path:
+    """The simulated two-floor building with only ``keep_on_f2`` of floor F2's walks kept."""
+    cfg = preset_config("tiny", 5)
+    simulate.run(base / "sim", replace(cfg, building=replace(cfg.building, floors=2, floor_change_walks=0)))
+    walks = pd.read_csv(base / "sim" / "walks.csv", dtype={"walk_id": str, "floor": str})
+    drop = set(walks.loc[walks["floor"] == "F2", "walk_id"].iloc[keep_on_f2:])
+    for f in sorted((base / "sim").rglob("*.csv")):
+        df = pd.read_csv(f, dtype={"walk_id": str, "floor": str})
+        if "walk_id" in df:
+            df[~df["walk_id"].isin(drop)].to_csv(f, index=False)
+    return base / "sim"
+
+
+def test_evaluate_of_a_building_scores_the_floors_it_can(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A floor with a single walk cannot be split into map and test walks: the building's evaluate scores
+    the other floor and names the skipped one, instead of failing whole."""
+    ws = tmp_path / "ws"
+    inp = _building_with_walks(tmp_path, keep_on_f2=1)
+    for args in (["ingest", inp, "-w", ws], ["optimize", "-w", ws], ["export-map", "-w", ws]):
+        assert run_cli(capsys, *args, "-q").code == 0
+    r = run_cli(capsys, "evaluate", "-w", ws)
+    assert r.code == 0, r.err
+    assert "floor F1:" in r.out and "floor F2 skipped: evaluation needs at least 2 walks" in r.out
+    b = json.loads(building_report_path(ws, "evaluate").read_text())["building"]
+    assert list(b["skipped_floors"]) == ["F2"] and b["floor_classification"]["per_floor"].keys() == {"F1"}
+    assert run_cli(capsys, "report", "-w", ws, "--out", tmp_path / "b.html").code == 0
+    assert "Floors not evaluated" in (tmp_path / "b.html").read_text()
+    with pytest.raises(InputError, match="no floor could be evaluated: F2: evaluation needs at least 2 walks"):
+        evaluate.run(ws, EvaluateConfig(), floor="F2", force=True)
 
 
 def test_uji_csv_of_a_floor_carries_its_level(building: dict[str, Path]) -> None:
@@ -184,7 +221,9 @@ def test_uji_csv_of_a_floor_carries_its_level(building: dict[str, Path]) -> None
     for f in ("F1", "F2"):
         csv = pd.read_csv(building["both"] / "floors" / f / "map" / "radiomap_uji.csv")
         assert (csv["FLOOR"] == levels[f]).all()
-    assert (pd.read_csv(building["F2"] / "map" / "radiomap_uji.csv")["FLOOR"] == 0).all()
+    # one numbering: the floor ingested alone (its input names it F2) is the same FLOOR as in its building
+    assert json.loads((building["F2"] / "data" / "report.json").read_text())["floor"] == "F2"
+    assert (pd.read_csv(building["F2"] / "map" / "radiomap_uji.csv")["FLOOR"] == levels["F2"]).all()
 
 
 def test_localize_on_a_building_takes_one_floor(building: dict[str, Path], tmp_path: Path,

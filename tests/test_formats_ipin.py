@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import IpinConfig, PdrConfig
+from rmbuild.config.ingest import IngestConfig, IpinConfig
+from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.ingest_core import derive_poses
+from rmbuild.ingest.core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader, wgs84_to_enu
 from rmbuild.io.formats.msft_ilc import MsftIlcReader
 
@@ -20,9 +20,9 @@ PHONE = HERE / "tiny_logfile.txt"
 FOOT = HERE / "tiny_logfile_imui.txt"
 
 
-def read(files, options: PdrConfig | None = None):
+def read(files, options: PdrConfig | None = None, ipin: IpinConfig | None = None):
     """The reader's raw input, with the PDR run on its raw IMU as ingest does."""
-    raw = IpinReader(options).read([Path(f) for f in files], IngestConfig())
+    raw = IpinReader().read([Path(f) for f in files], IngestConfig(ipin=ipin or IpinConfig()))
     derive_poses(raw, options or PdrConfig())
     return raw
 
@@ -74,15 +74,15 @@ def test_foot_imu_logfile_uses_imui():
     assert p["x_m"].iat[-1] == pytest.approx(4.2) and p["y_m"].iat[-1] == pytest.approx(2.8)
     assert p["heading_rad"].iat[-1] == pytest.approx(np.pi / 2)
     assert p["yaw_abs_rad"].isna().all()
-    cov = read([FOOT], PdrConfig(ipin=IpinConfig(imui_covariance=True))).poses
+    cov = read([FOOT], ipin=IpinConfig(imui_covariance=True)).poses
     assert cov["odo_sigma_x_m"].iat[1] == pytest.approx(0.01) and cov["odo_sigma_theta_rad"].iat[1] == 0.01
-    enu = read([FOOT], PdrConfig(ipin=IpinConfig(imui_z_down=False))).poses
+    enu = read([FOOT], ipin=IpinConfig(imui_z_down=False)).poses
     assert enu["y_m"].iat[-1] == pytest.approx(-2.8)
 
 
 def test_origin_option_and_enu():
-    raw = read([PHONE, FOOT], PdrConfig(ipin=IpinConfig(origin_lat_deg=49.461316433032,
-                                                        origin_lon_deg=11.110964442580 - 0.001)))
+    raw = read([PHONE, FOOT], ipin=IpinConfig(origin_lat_deg=49.461316433032,
+                                              origin_lon_deg=11.110964442580 - 0.001))
     assert raw.fixes["x_m"].iat[0] == pytest.approx(72.6, abs=0.5)   # 0.001° of longitude at 49.46° N
     e, n = wgs84_to_enu(np.array([0.0, 0.001]), np.array([0.001, 0.0]), 0.0, 0.0)
     np.testing.assert_allclose(e, [111.32, 0.0], atol=0.01)

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import MsftIlcConfig, PdrConfig
+from rmbuild.config.ingest import IngestConfig, MsftIlcConfig
+from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
-from rmbuild.ingest_core import derive_poses
+from rmbuild.ingest.core import derive_poses
 from rmbuild.io.formats.ipin import IpinReader
 from rmbuild.io.formats.msft_ilc import MsftIlcReader, parse_trace
 
@@ -21,9 +21,9 @@ DATASETS = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 ILC = DATASETS / "msft-ilc20" / "data"
 
 
-def read(files, options: PdrConfig | None = None):
+def read(files, options: PdrConfig | None = None, ilc: MsftIlcConfig | None = None):
     """The reader's raw input, with the PDR run on its raw IMU as ingest does."""
-    raw = MsftIlcReader(options).read([Path(f) for f in files], IngestConfig())
+    raw = MsftIlcReader().read([Path(f) for f in files], IngestConfig(msft_ilc=ilc or MsftIlcConfig()))
     derive_poses(raw, options or PdrConfig())
     return raw
 
@@ -82,7 +82,7 @@ def test_gzip_and_wifi_age_option(tmp_path):
     a, b = read([FIXTURE]), read([gz])
     assert a.poses.drop(columns="walk_id").equals(b.poses.drop(columns="walk_id"))
     assert list(b.walks["walk_id"]) == ["tiny_trace"]
-    keep_all = read([gz], PdrConfig(msft_ilc=MsftIlcConfig(max_wifi_age_s=60.0)))
+    keep_all = read([gz], ilc=MsftIlcConfig(max_wifi_age_s=60.0))
     assert len(keep_all.wifi) == 20
 
 
@@ -252,7 +252,7 @@ def test_real_site2_f4_pdr_against_waypoints():
     assert 0.9 < np.median(ratios) < 1.15
     assert np.percentile(ratios, 10) > 0.75 and np.percentile(ratios, 90) < 1.35
     # stale rows: the filter drops roughly half
-    tr = parse_trace(files[0], PdrConfig())
+    tr = parse_trace(files[0], MsftIlcConfig())
     assert tr.n_wifi_stale > 0
 
 

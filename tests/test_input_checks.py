@@ -14,7 +14,7 @@ from cli_util import run_cli
 from conftest import make_input_tables, write_tables
 
 from rmbuild.errors import InputError
-from rmbuild.ingest_checks import evidence_warnings, walk_rss_offsets
+from rmbuild.ingest.checks import evidence_warnings, walk_rss_offsets
 from rmbuild.io.anchors import check_anchors, read_anchors
 from rmbuild.io.workspace import Workspace
 
@@ -162,7 +162,26 @@ def test_a_device_offset_is_reported_and_plain_walks_are_not(tmp_path: Path) -> 
         warnings = evidence_warnings(ds2)
         assert len(warnings) == 1 and warnings[0].startswith(f"walk {wid!r} reads {off[wid]:+.1f} dB"), warnings
         assert "slac localizer calibrates devices" in warnings[0]
+    # several offset walks: one warning naming each with its offset, largest first
+    ids = [str(w) for w in ds.walks["walk_id"].iloc[1:3]]
+    ds3 = Workspace.open(tmp_path / "ws").read_dataset()
+    for wid, shift in zip(ids, (10.0, -16.0), strict=True):
+        ds3.wifi.loc[ds3.wifi["walk_id"] == wid, "rssi_dbm"] += shift
+    warnings = evidence_warnings(ds3)
+    assert len(warnings) == 1 and warnings[0].startswith("2 walks read 6 dB or more"), warnings
+    assert warnings[0].index(repr(ids[1])) < warnings[0].index(repr(ids[0]))  # the larger offset first
+    assert "they may stay unlinked" in warnings[0]
     assert isinstance(SimulateConfig(), SimulateConfig)
+
+
+def test_many_offset_walks_are_one_short_warning() -> None:
+    from rmbuild.ingest.checks import NAMED_OFFSETS, offset_warning
+
+    offsets = {f"walk{i:02d}": (-1) ** i * (6.0 + i) for i in range(11)}
+    (text,) = offset_warning(offsets)
+    assert text.count(" dB,") == NAMED_OFFSETS - 1 and "'walk10' +16.0 dB" in text
+    assert f"and {11 - NAMED_OFFSETS} more" in text and "'walk00'" not in text and len(text) < 450
+    assert offset_warning({}) == []
 
 
 def test_a_three_step_walk_is_reported(tmp_path: Path, capsys) -> None:
@@ -225,7 +244,8 @@ def _unlinked_walks_are_marked(ws_dir: Path, walks: pd.DataFrame, capsys) -> Non
     assert dict(zip(tum["walk_id"], tum["linked"].astype(bool), strict=True)) == linked
     n_unlinked = sum(not v for v in linked.values())
     assert run_cli(capsys, "report", "-w", ws_dir).code == 0
-    assert f"{n_unlinked} walk(s) not linked to the map are not drawn" in (ws_dir / "report.html").read_text()
+    page = (ws_dir / "report.html").read_text()
+    assert f"the {n_unlinked} walk(s) optimize could not link" in page and "they are not drawn after" in page
     assert run_cli(capsys, "view", "-w", ws_dir, "--save", ws_dir / "v.rrd").code == 0
     ents = rrd_entities(ws_dir / "v.rrd")
     assert sum(e.startswith("/floor/optimized_unlinked/") and e.count("/") == 3 for e in ents) == n_unlinked

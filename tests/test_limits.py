@@ -61,7 +61,7 @@ def test_an_ilc_waypoint_of_1e30_names_its_line(tmp_path: Path, capsys) -> None:
 
 
 def test_a_fingerprint_table_over_the_limit_is_refused(tmp_path: Path, capsys, monkeypatch) -> None:
-    import rmbuild.ingest_core as core
+    import rmbuild.ingest.core as core
 
     folder = write_tables(make_input_tables(n_steps=40), tmp_path / "in")
     monkeypatch.setattr(core, "MAX_FINGERPRINT_CELLS", 20)  # 10 + 10 nodes with readings x 5 APs
@@ -71,7 +71,7 @@ def test_a_fingerprint_table_over_the_limit_is_refused(tmp_path: Path, capsys, m
 
 
 def test_a_walk_longer_than_the_limits_is_refused(tmp_path: Path, capsys, monkeypatch) -> None:
-    import rmbuild.ingest_core as core
+    import rmbuild.ingest.core as core
 
     folder = write_tables(make_input_tables(n_steps=30), tmp_path / "in")
     monkeypatch.setattr(core, "MAX_WALK_POSES", 25)

@@ -7,11 +7,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.config.localize import HistogramLocConfig
+from rmbuild.baselines.config import HistogramLocConfig
+from rmbuild.baselines.histogram import DirectionHistogramLocalizer, HistogramLocalizer
 from rmbuild.config.radiomap import MapConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query
-from rmbuild.localize.histogram import DirectionHistogramLocalizer, HistogramLocalizer
 from rmbuild.radiomap import build_radio_map
 
 

@@ -6,13 +6,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.config.localize import BayesConfig, PflConfig, SmoothingConfig, SsdConfig
+from rmbuild.baselines.bayes import NaiveBayesLocalizer
+from rmbuild.baselines.config import BayesConfig, PflConfig, SmoothingConfig, SsdConfig
+from rmbuild.baselines.pfl import PflLocalizer
+from rmbuild.baselines.smoothing import KalmanSmoothed, kalman_smooth, pdr_positions
+from rmbuild.baselines.ssd import SsdLocalizer
 from rmbuild.errors import ConfigError, InputError
 from rmbuild.localize.base import Query, ReferenceSet
-from rmbuild.localize.bayes import NaiveBayesLocalizer
-from rmbuild.localize.pfl import PflLocalizer
-from rmbuild.localize.smoothing import KalmanSmoothed, kalman_smooth, pdr_positions
-from rmbuild.localize.ssd import SsdLocalizer
 
 
 def _ref(n_rp=200, n_ap=15, seed=0):

@@ -10,14 +10,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.config.localize import MllConfig, SmartLocatorConfig, SsrConfig
+from rmbuild.baselines.bayes import NaiveBayesLocalizer
+from rmbuild.baselines.calibration import colocated_pairs, deming, fit_device_model
+from rmbuild.baselines.config import MllConfig, SmartLocatorConfig, SsrConfig
+from rmbuild.baselines.mll import MllLocalizer, walked_between
+from rmbuild.baselines.smartloc import SmartLocator, StaticSmartLocator
+from rmbuild.baselines.ssd import SsrLocalizer
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet
-from rmbuild.localize.bayes import NaiveBayesLocalizer
-from rmbuild.localize.calibration import colocated_pairs, deming, fit_device_model
-from rmbuild.localize.mll import MllLocalizer, walked_between
-from rmbuild.localize.smartloc import SmartLocator, StaticSmartLocator
-from rmbuild.localize.ssd import SsrLocalizer
 
 
 def _grid_ref(seed=0, n_ap=12, spacing=2.0, size=40.0, noise=1.0):

@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from rmbuild.config.localize import SlacConfig
+from rmbuild.baselines.calibration import calibrate_query, fit_device_model, to_map_units
+from rmbuild.baselines.config import SlacConfig
+from rmbuild.baselines.slac import SlacLocalizer, berhu, greedy_capped, project_capped_simplex
 from rmbuild.errors import ConfigError, InputError
 from rmbuild.localize.base import Query, ReferenceSet
-from rmbuild.localize.calibration import calibrate_query, fit_device_model, to_map_units
-from rmbuild.localize.slac import SlacLocalizer, berhu, greedy_capped, project_capped_simplex
 
 
 def _ref(n_rp=60, n_ap=12, seed=0, std=True):
@@ -170,7 +170,7 @@ def _synthetic(device):
     from rmbuild.config.ingest import IngestConfig
     from rmbuild.config.simulate import preset_config
     from rmbuild.evaluate.localization import reference_positions, split_walks
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats.base import RawInput
     from rmbuild.radiomap import build_radio_map
     from rmbuild.synthetic import simulate

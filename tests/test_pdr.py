@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from rmbuild.config.base import from_dict
+from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import ConfigError
 from rmbuild.geometry import wrap as wrap_angle
@@ -257,16 +258,20 @@ def test_missing_signals_raise_value_error():
 
 
 def test_config_is_strict():
-    cfg = from_dict(PdrConfig, {"heading_source": "gyro", "msft_ilc": {"max_wifi_age_s": 5}})
-    assert cfg.msft_ilc.max_wifi_age_s == 5.0
+    cfg = from_dict(PdrConfig, {"heading_source": "gyro"})
+    assert cfg.heading_source == "gyro"
+    ing = from_dict(IngestConfig, {"msft_ilc": {"max_wifi_age_s": 5}})
+    assert ing.msft_ilc.max_wifi_age_s == 5.0
+    with pytest.raises(ConfigError, match="unknown key 'msft_ilc'"):
+        from_dict(PdrConfig, {"msft_ilc": {"max_wifi_age_s": 5}})
     with pytest.raises(ConfigError, match="unknown key"):
         from_dict(PdrConfig, {"step_detector": "peak_valley"})
     with pytest.raises(ConfigError, match="must be one of"):
         from_dict(PdrConfig, {"heading_source": "compass"})
     with pytest.raises(ConfigError, match="together"):
-        from_dict(PdrConfig, {"ipin": {"origin_lat_deg": 10.0}})
+        from_dict(IngestConfig, {"ipin": {"origin_lat_deg": 10.0}})
     with pytest.raises(ConfigError, match="max_wifi_age_s"):
-        from_dict(PdrConfig, {"msft_ilc": {"max_wifi_age_s": -1}})
+        from_dict(IngestConfig, {"msft_ilc": {"max_wifi_age_s": -1}})
     with pytest.raises(ConfigError, match="max_gap_s"):
         from_dict(PdrConfig, {"max_gap_s": 1e9})
 

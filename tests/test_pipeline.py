@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +128,33 @@ def test_true_paths_are_written_as_tum_beside_the_estimates(tiny_ws: Path) -> No
         assert np.allclose(np.hypot(b[:, 6], b[:, 7]), 1.0)  # unit quaternions (qz, qw)
 
 
+def test_the_whole_map_is_one_tum_file_on_a_shared_clock(tiny_ws: Path) -> None:
+    """map/evo/: every walk of the map in one file, the walks one after another on one clock, its truth on
+    the same clock; one rigid fit of the whole map (evo_ape ... -a) gives optimize's ATE, and the map at
+    the waypoints gives its landmark error."""
+    from rmbuild.evaluate.trajectory import align_se2
+    from rmbuild.io.tum import GAP_S, read_tum
+
+    ws = Workspace.open(tiny_ws / "ws")
+    rep, opt = ws.read_report("map"), ws.read_report("optimize")
+    est, tru = read_tum(ws.read_text("map.evo_map")), read_tum(ws.read_text("map.evo_truth"))
+    assert est.shape == tru.shape and np.array_equal(est[:, 0], tru[:, 0]) and (np.diff(est[:, 0]) > 0).all()
+    clock = pd.read_csv(ws.path("map.evo_clock"), dtype={"walk_id": str})
+    poses = ws.read_table("optimize.poses")
+    assert len(est) == len(poses) and opt["linked_walks"] == opt["walks"] == len(clock)  # every walk in the map
+    spans = poses.groupby("walk_id", sort=False)["t_s"].agg(["min", "max"]).loc[clock["walk_id"]]
+    off = clock["offset_s"].to_numpy()
+    starts, ends = spans["min"].to_numpy() + off, spans["max"].to_numpy() + off
+    assert starts[0] == 0.0 and np.allclose(starts[1:] - ends[:-1], GAP_S)  # end to end, never overlapping
+    r, t = align_se2(est[:, 1:3], tru[:, 1:3])
+    res = np.hypot(*(est[:, 1:3] @ r.T + t - tru[:, 1:3]).T)
+    assert np.sqrt((res ** 2).mean()) == pytest.approx(opt["optimized"]["ate_m"]["rmse"], rel=1e-5)
+    wp, at = read_tum(ws.read_text("map.evo_waypoints")), read_tum(ws.read_text("map.evo_map_at_waypoints"))
+    assert np.array_equal(wp[:, 0], at[:, 0]) and len(wp) == opt["optimized"]["landmark_error_m"]["n"]
+    assert rep["evo"]["commands"] == ["evo_ape tum map/evo/truth.txt map/evo/map.txt -a",
+                                      "evo_ape tum map/evo/waypoints.txt map/evo/map_at_waypoints.txt -a"]
+
+
 def test_unknown_localizer_and_test_walk(tiny_ws: Path, capsys) -> None:
     r = run_cli(capsys, "evaluate", "-w", tiny_ws / "ws", "--localizer", "magic")
     assert r.code == 2 and "magic" in r.err
@@ -173,6 +201,13 @@ def test_list_options_are_repeatable_and_comma_separated(tiny_ws: Path, tmp_path
     rep = json.loads(Workspace.open(tmp_path / "ws").report_path("evaluate").read_text())
     assert rep["test_walks"] == walks[:2]
     assert all(set(m) == {"knn", "nb"} for m in rep["maps"].values())
+    # a paper baseline runs from `evaluate --localizer`, configured by its [evaluate.baselines.<name>] table
+    (tmp_path / "nb.toml").write_text("[evaluate.baselines.nb]\nk = 1\n")
+    r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "-q", "--localizer", "nb",
+                "--config", tmp_path / "nb.toml")
+    assert r.code == 0, r.err
+    written = tomllib.loads(Workspace.open(tmp_path / "ws").read_config_text("evaluate") or "")
+    assert written["evaluate"]["baselines"]["nb"]["k"] == 1
     r = run_cli(capsys, "evaluate", "-w", tmp_path / "ws", "--force", "--localizer", "knn,magic")
     assert r.code == 2 and "'magic' is not one of" in r.err and len(r.err.strip().splitlines()) == 1
 

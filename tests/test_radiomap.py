@@ -93,6 +93,16 @@ def test_long_wide_sidecar():
     assert side["config"]["cell_size_m"] == 2.0
 
 
+def test_uji_columns_have_three_digits_as_uji_indoorloc_and_go_on_past_999():
+    wifi = pd.DataFrame({"node": 0, "bssid": [f"ap{j:04d}" for j in range(1001)], "rssi_dbm": -70.0})
+    rm = build_radio_map(wifi, np.array([[1.0, 1.0]]), np.array(["w0"]), MapConfig(cell_size_m=2.0))
+    names = rm.wap_names()
+    assert names[:2] == ["WAP001", "WAP002"] and names[519] == "WAP520" and names[998] == "WAP999"
+    assert names[999:] == ["WAP1000", "WAP1001"]
+    cols = [c for c in rm.wide_table("uji").columns if c.startswith("WAP")]
+    assert cols == names and rm.sidecar()["ap_columns"]["WAP1001"] == "ap1000"
+
+
 def test_bad_input():
     wifi, xy, walk = _hand_data()
     with pytest.raises(InputError, match="cell_size_m"):

@@ -15,7 +15,7 @@ pytest.importorskip("gtsam")
 from rmbuild.config.ingest import IngestConfig  # noqa: E402
 from rmbuild.config.optimize import OptimizeConfig  # noqa: E402
 from rmbuild.evaluate.trajectory import align_se2, interpolate_xy  # noqa: E402
-from rmbuild.ingest_core import build_dataset  # noqa: E402
+from rmbuild.ingest.core import build_dataset  # noqa: E402
 from rmbuild.io.formats.msft_ilc import MsftIlcReader  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
 

@@ -8,12 +8,13 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from slam_venue import make_venue  # noqa: E402
+
 from bench.bench_scan_rate import keeper, thin_lines  # noqa: E402
 from rmbuild.config.optimize import OptimizeConfig  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
 from rmbuild.slam.evidence.wifi import sparse_scans_warning  # noqa: E402
 from rmbuild.slam.problem import WalkSet  # noqa: E402
-from rmbuild.slam.testing import make_venue  # noqa: E402
 
 STEP_M = 0.7
 

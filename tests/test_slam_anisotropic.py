@@ -8,13 +8,14 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
+from slam_venue import make_venue  # noqa: E402
+
 from rmbuild.config.optimize import OptimizeConfig, WifiConfig, paper_config  # noqa: E402
 from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
 from rmbuild.slam.evidence import wifi  # noqa: E402
 from rmbuild.slam.evidence.wifi import estimate_across_ratio, pair_offsets  # noqa: E402
 from rmbuild.slam.factors import X, anisotropic_factor, anisotropic_noise  # noqa: E402
-from rmbuild.slam.testing import make_venue  # noqa: E402
 
 
 def test_factor_error_is_the_offset_in_q_frame():
@@ -76,7 +77,7 @@ def test_ratio_estimated_from_parallel_pairs():
 
 def test_pipeline_estimates_the_ratio_and_places_better():
     """On the corridor test venue the ratio comes out below 1, the final solve's parallel pairs are
-    anisotropic and the landmark error drops (seed 1 of slam/testing.py: 1.29 -> 0.83 m)."""
+    anisotropic and the landmark error drops (seed 1 of tests/slam_venue.py: 1.29 -> 0.83 m)."""
     ds, fp = make_venue(n_walks=5, steps_per_walk=260, seed=1)
     iso = optimize(ds, fp, OptimizeConfig(wifi=WifiConfig(across_ratio=1.0)))
     auto = optimize(ds, fp, OptimizeConfig())

@@ -7,12 +7,13 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from slam_venue import make_venue, split_walk, walk_set  # noqa: E402
+
 from rmbuild.config.optimize import ContinuityConfig, OptimizeConfig  # noqa: E402
 from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
 from rmbuild.slam.evidence.continuity import find_joins  # noqa: E402
 from rmbuild.slam.rfmodel import RFModel  # noqa: E402
-from rmbuild.slam.testing import make_venue, split_walk, walk_set  # noqa: E402
 
 
 def test_joins_follow_time_within_one_device():

@@ -60,7 +60,7 @@ def test_no_offset_when_aps_differ_both_ways():
 def two_phones():
     """A venue whose last three walks were recorded by a second phone reading 10 dB higher."""
     pytest.importorskip("gtsam")
-    from rmbuild.slam.testing import make_venue
+    from slam_venue import make_venue
 
     ds, fp = make_venue(n_walks=6, steps_per_walk=260, seed=4)
     walks = ds.walks.assign(device_id=["d0"] * 3 + ["d1"] * 3)

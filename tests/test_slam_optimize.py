@@ -10,11 +10,12 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from slam_venue import false_pairs, make_venue, walk_set  # noqa: E402
+
 from rmbuild.config.optimize import OptimizeConfig, paper_config  # noqa: E402
 from rmbuild.errors import InputError  # noqa: E402
 from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
-from rmbuild.slam.testing import false_pairs, make_venue, walk_set  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,8 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from slam_venue import make_venue, walk_set  # noqa: E402
+
 from rmbuild.config.optimize import OptimizeConfig, PlacementConfig  # noqa: E402
 from rmbuild.evaluate.trajectory import trajectory_metrics  # noqa: E402
 from rmbuild.slam import optimize  # noqa: E402
@@ -16,7 +18,6 @@ from rmbuild.slam.placement.grow import SE2_MAX_COMPASS_DEV_RAD, _fit_both, wind
 from rmbuild.slam.placement.merge import merge_components, orient_components  # noqa: E402
 from rmbuild.slam.placement.model import GrowState, Placement, WalkFit  # noqa: E402
 from rmbuild.slam.problem import covered_m  # noqa: E402
-from rmbuild.slam.testing import make_venue, walk_set  # noqa: E402
 
 
 def _rot_known(theta, known, sigma=np.inf):

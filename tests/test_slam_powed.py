@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from slam_venue import walk_set
 
 from rmbuild.slam.powed import auc, choose, powed
-from rmbuild.slam.testing import walk_set
 from rmbuild.types import Fingerprints
 
 

@@ -9,6 +9,8 @@ import pytest
 
 pytest.importorskip("gtsam")
 
+from slam_venue import make_venue  # noqa: E402
+
 from rmbuild.config.optimize import OdometryConfig, OptimizeConfig  # noqa: E402
 from rmbuild.slam import (  # noqa: E402
     optimize,  # noqa: E402
@@ -16,7 +18,6 @@ from rmbuild.slam import (  # noqa: E402
     schedule,
 )
 from rmbuild.slam.scale import fit_stretch, increment_scale, scaled_raw  # noqa: E402
-from rmbuild.slam.testing import make_venue  # noqa: E402
 
 
 def _stretched_venue(factor: float, walk: str = "w002"):

@@ -10,12 +10,12 @@ import tomllib
 import numpy as np
 import pandas as pd
 import pytest
+from synthetic_difficulty import pair_rule_stats, raw_walk_errors, rss_distance
 
 from rmbuild.config.base import from_dict, to_toml
 from rmbuild.config.simulate import MAX_SIMULATED_STEPS, SimulateConfig, preset_config
 from rmbuild.errors import ConfigError
 from rmbuild.synthetic import radio_field, simulate
-from rmbuild.synthetic.diagnostics import pair_rule_stats, raw_walk_errors, rss_distance
 from rmbuild.synthetic.geometry import segments_cross, wall_loss_from_point
 
 TABLES = ("walks", "poses", "wifi", "fixes", "truth_poses", "truth_aps", "truth_devices", "truth_users",

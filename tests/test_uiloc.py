@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from rmbuild.baselines.selfbuild import merge_fingerprints
+from rmbuild.baselines.uiloc import UilocLocalizer, ap_positions, fit_path_loss, multilaterate
 from rmbuild.localize.base import Query, make_localizer
-from rmbuild.localize.uiloc import UilocLocalizer, ap_positions, fit_path_loss, multilaterate
 from rmbuild.radiomap.reference import ReferenceSet
-from rmbuild.radiomap.selfbuild import merge_fingerprints
 
 
 def test_multilaterate_exact_ranges_recover_the_point():

@@ -200,12 +200,14 @@ def test_report_and_recordings_are_not_overwritten_without_force(optimized: Path
     r = run_cli(capsys, "report", "-w", root, "--out", mine)
     assert r.code == 2 and "--force" in r.err and mine.read_text() == "my notes"
     assert run_cli(capsys, "report", "-w", root, "--out", mine, "--force", "-q").code == 0
-    assert mine.read_text().startswith("<!DOCTYPE html>")
-    r = run_cli(capsys, "report", "-w", root)  # the figures of the first report are in WORKSPACE/report/
-    assert r.code == 2 and "already holds report figures" in r.err
-    assert run_cli(capsys, "report", "-w", root, "-q", "--force").code == 0
+    assert mine.read_text().startswith("<!DOCTYPE html>") and (tmp_path / "mine_figures" / "walks.png").is_file()
+    assert run_cli(capsys, "report", "-w", root, "-q").code == 0  # --out wrote nothing into the workspace
     r = run_cli(capsys, "report", "-w", root)
     assert r.code == 2 and "report.html already exists" in r.err
+    (root / "report.html").unlink()
+    r = run_cli(capsys, "report", "-w", root)  # the figures of the last report are in WORKSPACE/report/
+    assert r.code == 2 and "already holds report figures" in r.err
+    assert run_cli(capsys, "report", "-w", root, "-q", "--force").code == 0
     rrd = tmp_path / "mine.rrd"
     rrd.write_bytes(b"precious")
     r = run_cli(capsys, "view", "-w", root, "--save", rrd)

@@ -41,7 +41,7 @@ SUMMARIES = {
     "diff-map": "Report per AP what changed between two workspaces' radio maps.",
     "view": "Log a workspace to the rerun viewer.",
     "report": "Write a one-page HTML report of a workspace.",
-    "config": "Print every stage's settings as TOML (defaults, or a file resolved).",
+    "config": "Print the settings a user changes as TOML (--all: every setting).",
     "build": "The whole pipeline in one command; floors run as parallel (Dask) tasks.",
 }
 
@@ -57,6 +57,18 @@ class LazyGroup(click.Group):
         if name not in COMMANDS:
             return None
         return load_command(name)
+
+    def resolve_command(self, ctx: click.Context, args: list[str]) -> tuple[str | None, click.Command | None,
+                                                                           list[str]]:
+        """As click's, but a mistyped command is told the commands it resembles (as options are)."""
+        name = args[0] if args else ""
+        if name and not name.startswith("-") and name not in COMMANDS:
+            import difflib
+
+            close = difflib.get_close_matches(name, list(COMMANDS), n=2, cutoff=0.6)
+            hint = f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            raise click.UsageError(f"No such command {name!r}.{hint}", ctx)
+        return super().resolve_command(ctx, args)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(n, SUMMARIES.get(n, "")) for n in self.list_commands(ctx)]

@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, floor_option, list_option, stage_viewer, start, workspace_option
-from rmbuild.cli.view import rerun_option
+from rmbuild.cli.options import (
+    common_options,
+    floor_option,
+    list_option,
+    rerun_option,
+    stage_viewer,
+    start,
+    workspace_option,
+)
 from rmbuild.localize.registry import describe, localizer_names
 
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, floor_option, stage_viewer, start, workspace_option
-from rmbuild.cli.view import rerun_option
+from rmbuild.cli.options import common_options, floor_option, rerun_option, stage_viewer, start, workspace_option
 
 
 @click.command("export-map")
@@ -51,6 +50,8 @@ def _summary(r: dict, where) -> None:
         click.echo(f"note: no BLE radio map: {ble['skipped']}", err=True)
     elif ble:
         click.echo(f"BLE radio map: {ble['cells']} cells, {ble['beacons']} beacons -> {where / 'radiomap_ble.parquet'}")
+    for cmd in (r.get("evo") or {}).get("commands") or []:
+        click.echo(f"score the whole map with evo (in the workspace): {cmd}")
     left = r["frame_info"].get("left_out_walks") or []
     if left:
         click.echo(f"note: {len(left)} walk(s) placed neither by Wi-Fi links nor by anchors were left out: "

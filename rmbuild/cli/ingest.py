@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, stage_viewer, start, workspace_option
-from rmbuild.cli.view import rerun_option
+from rmbuild.cli.options import common_options, rerun_option, stage_viewer, start, workspace_option
 from rmbuild.io.formats import REGISTRY, reader_names
 
 FORMAT_HELP = "Input format (default: recognised from the files): " + "; ".join(

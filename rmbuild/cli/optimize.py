@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rmbuild.cli.options import common_options, floor_option, stage_viewer, start, workspace_option
-from rmbuild.cli.view import rerun_option
+from rmbuild.cli.options import common_options, floor_option, rerun_option, stage_viewer, start, workspace_option
 
 
 @click.command()
@@ -64,6 +63,8 @@ def _summary(r: dict) -> None:
         how = "estimated" if vi.get("estimated") else "set"
         click.echo(f"  anisotropic pairs: {vi['anisotropic_pairs']} of {f['vicinity']}, sigma across/along "
                    f"{vi['across_ratio']:.2f} ({how}; optimize/pairs.parquet: anisotropic)")
+    if (linked := _linked(r)) is not None:
+        click.echo(linked)
     plan = (r.get("evidence") or {}).get("floorplan")
     if plan and plan.get("used"):
         click.echo(f"  floor plan: {plan['inside']:.0%} of the reference component's poses in walkable space, "
@@ -72,28 +73,49 @@ def _summary(r: dict) -> None:
 
 
 def _errors(r: dict, metrics_text) -> None:
-    """The error lines: only figures that could be computed, and what they were measured against."""
-    lines = [(name, metrics_text(r.get(name))) for name in ("raw", "optimized")]
-    if not any(t for _, t in lines):
+    """The error lines: only figures that could be computed, and what they were measured against. With
+    unlinked walks, the optimised figure is the linked walks' (an unlinked walk's frame is arbitrary); the
+    all-walk comparison puts the unlinked walks where their dead reckoning alone puts them."""
+    raw, opt = r.get("raw") or {}, r.get("optimized") or {}
+    al = r.get("metrics_alignment") or {}
+    lk = opt.get("landmark_error_fitted_walks_m")
+    some_unlinked = al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]
+    shown_opt = {"landmark_error_m": lk} if some_unlinked and lk else opt
+    if not (metrics_text(raw) or metrics_text(shown_opt)):
         click.echo("  no true paths or position fixes: no error against ground truth")
         return
-    have_truth = (r.get("raw") or {}).get("ate_m") is not None
+    have_truth = raw.get("ate_m") is not None
     how = "true paths" if have_truth else "the waypoints / position fixes (no true paths: no ATE)"
     fit = ("each after one rigid fit of all walks together" if r.get("gauge") == "se2" else
            "raw after one rigid fit of all walks together, optimised as placed in the building frame")
     click.echo(f"  errors against {how}, {fit}:")
-    al = r.get("metrics_alignment") or {}
-    some_unlinked = al.get("fitted_on") == "linked walks" and al.get("walks", 0) < r["walks"]
-    for name, text in lines:
-        if text:
-            where = " (the unlinked walks where the optimiser left them)" if name == "optimized" else ""
-            click.echo(f"  {name:9s} {text}{where if some_unlinked else ''}")
-    lk = (r.get("optimized") or {}).get("landmark_error_fitted_walks_m")
-    if lk and some_unlinked:
-        click.echo(f"  linked walks only ({al['walks']} of {r['walks']}): "
-                   f"{metrics_text({'landmark_error_m': lk})}; the unlinked walks keep arbitrary frames and "
-                   "are left out of the map")
-        at_raw = (r.get("optimized") or {}).get("landmark_error_unlinked_at_raw_m")
+    if metrics_text(raw):
+        click.echo(f"  raw       {metrics_text(raw)} (all {r['walks']} walks)")
+    if some_unlinked:
+        n_un = r["walks"] - al["walks"]
+        if lk:
+            click.echo(f"  optimized {metrics_text(shown_opt)} (the {al['walks']} linked walks; the {n_un} "
+                       "unlinked keep arbitrary frames and are left out of the map)")
+        at_raw = opt.get("landmark_error_unlinked_at_raw_m")
         if at_raw:
             click.echo(f"  all walks, the unlinked at their raw placement (against raw above): "
                        f"{metrics_text({'landmark_error_m': at_raw})}")
+    elif metrics_text(opt):
+        click.echo(f"  optimized {metrics_text(opt)}")
+
+
+def _linked(r: dict) -> str | None:
+    """How many walks are in the map, reconciled with the progress bar's count of walks placed by Wi-Fi
+    (which is taken before the RF check leaves some of them out)."""
+    n = r.get("linked_walks")
+    if not isinstance(n, int):
+        return None
+    refuted = len(r.get("refuted_walks") or [])
+    anchored = r.get("anchored_only_walks") or 0
+    text = f"  linked into the map: {n} of {r['walks']} walks"
+    if refuted:
+        text += (f"; the RF check then refuted {refuted} of the walks the progress bar counted as placed by "
+                 "Wi-Fi (optimize/walks.parquet: placement 'refuted')")
+    if anchored:
+        text += f"; {anchored} more placed by anchors alone"
+    return text

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import click
@@ -17,8 +18,8 @@ def common_options(f: Callable[..., Any]) -> Callable[..., Any]:
     f = click.option("-q", "--quiet", is_flag=True,
                      help="No progress, tables or summaries: only warnings and errors.")(f)
     f = click.option("--force", is_flag=True,
-                     help="Replace this stage's existing outputs (for ingest: the workspace) and an existing "
-                          "--rerun recording.")(f)
+                     help="Replace existing outputs (for ingest: the workspace); without it nothing is "
+                          "overwritten.")(f)
     f = click.option(
         "--config", "config_path", type=click.Path(dir_okay=False), default=None,
         help="TOML file with a table per stage ([ingest], [optimize], ...); unknown keys are errors.",
@@ -56,12 +57,37 @@ workspace_option = click.option(
 )
 
 
+#: `--rerun` for stage commands: absent -> no viewer; `--rerun` alone -> "auto" (spawn when a display is
+#: available, else save WORKSPACE/<stage>.rrd); `--rerun spawn|serve|FILE.rrd`.
+rerun_option = click.option(
+    "--rerun", "rerun", default=None, is_flag=False, flag_value="auto", metavar="[spawn|serve|FILE.rrd]",
+    help="Log to rerun while the stage runs: spawn the viewer, serve the web viewer, or save FILE.rrd "
+         "(alone: spawn with a display, else save WORKSPACE/<stage>.rrd; an existing recording is replaced "
+         "only with --force).",
+)
+
+
+def rerun_target(value: str | None, workspace: str | Path, stage: str):
+    """The ViewTarget for a stage's ``--rerun`` value (None -> None: the stage gets a NullViewer)."""
+    if value is None:
+        return None
+    from rmbuild.io.workspace import Workspace
+    from rmbuild.viz import ViewTarget, default_target
+
+    if value == "auto":
+        return default_target(Workspace(workspace).path(f"{stage}.rrd"))
+    if value in ("spawn", "serve"):
+        return ViewTarget(value)
+    if not value.endswith(".rrd"):
+        raise click.BadParameter("expected spawn, serve or a path ending in .rrd", param_hint="--rerun")
+    return ViewTarget("save", Path(value))
+
+
 @contextmanager
 def stage_viewer(rerun: str | None, workspace: str, stage: str, quiet: bool = False,
                  force: bool = False) -> Iterator[Any]:
     """The viewer of a stage's ``--rerun`` value (a do-nothing viewer when absent); closed on exit. An
     existing recording is replaced only with ``force``."""
-    from rmbuild.cli.view import rerun_target
     from rmbuild.io.workspace import check_output_file
     from rmbuild.viz import open_viewer
 

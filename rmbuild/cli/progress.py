@@ -13,16 +13,16 @@ from __future__ import annotations
 import logging
 import os
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
+from rmbuild.cli.phases import Phases
+
 if TYPE_CHECKING:
     from rmbuild.cli.progress_bars import RichProgress
 
-log = logging.getLogger("rmbuild.progress")
 
 
 @cache
@@ -43,50 +43,6 @@ def on_terminal() -> bool:
     if not (tty or os.environ.get("TTY_COMPATIBLE") == "1" or os.environ.get("FORCE_COLOR")):
         return False
     return bool(console().is_terminal)
-
-
-def count_text(done: float, total: float | None, unit: str) -> str:
-    if total is None:
-        return f"{done:,.0f} {unit}".strip() if done else ""
-    return f"{done:,.0f}/{total:,.0f} {unit}".strip()
-
-
-def rate_text(done: float, seconds: float, unit: str) -> str:
-    if done <= 0 or seconds <= 0:
-        return ""
-    r = done / seconds
-    return f"{r:,.1f} {unit}/s" if r < 100 else f"{r:,.0f} {unit}/s"
-
-
-class Phases:
-    """Bookkeeping shared by the bar and the log-only display: the open phase, its count and start."""
-
-    def __init__(self, verbose: bool) -> None:
-        self.verbose = verbose
-        self.name = ""
-        self.unit = ""
-        self.total: float | None = None
-        self.done = 0.0
-        self.t0 = 0.0
-        self.status = ""
-
-    def start(self, name: str, total: float | None, unit: str) -> None:
-        self.end()
-        self.name, self.total, self.unit, self.done, self.t0, self.status = (
-            name, total, unit, 0.0, time.perf_counter(), "")
-
-    def end(self) -> None:
-        if not self.name or not self.verbose:
-            self.name = ""
-            return
-        dt = time.perf_counter() - self.t0
-        parts = [f"{self.name}: done in {dt:.1f} s"]
-        if self.unit and self.done:
-            parts.append(f"{count_text(self.done, self.total, self.unit)} ({rate_text(self.done, dt, self.unit)})")
-        if self.status:
-            parts.append(self.status)
-        log.info("; ".join(parts))
-        self.name = ""
 
 
 class LogProgress:

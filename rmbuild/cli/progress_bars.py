@@ -20,7 +20,7 @@ from rich.progress import (
 from rich.table import Column
 from rich.text import Text
 
-from rmbuild.cli.progress import Phases, count_text, rate_text
+from rmbuild.cli.phases import Phases, count_text, rate_text
 
 
 class CountRateColumn(ProgressColumn):

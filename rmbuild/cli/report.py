@@ -10,7 +10,9 @@ from rmbuild.cli.options import floor_option, start, workspace_option
 @click.command()
 @workspace_option
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
-              help="HTML file to write (default WORKSPACE/report.html; PNGs go to WORKSPACE/report/).")
+              help="HTML file to write (default WORKSPACE/report.html, PNGs in WORKSPACE/report/); with --out "
+                   "its PNGs go beside it (OUT_figures/; a building's floor pages: OUT_floors/), nothing into the "
+                   "workspace.")
 @click.option("--top-aps", type=click.IntRange(1, 24), default=6, show_default=True,
               help="Heat maps of this many strongest APs.")
 @floor_option

@@ -8,7 +8,7 @@ from rmbuild.cli.options import common_options, start
 
 
 @click.command()
-@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.argument("out_dir", type=click.Path(file_okay=False), required=False)
 @click.option("--preset", type=click.Choice(["tiny", "default", "large", "month", "corridor12"]), default="default",
               show_default=True, help="Venue size: tiny (tests, seconds), default (~10 walks, ~5,000 steps), "
               "large (~50,000 steps, benchmarks), month (large's venue, ~500,000 steps, 1,000 walks), "
@@ -20,11 +20,14 @@ from rmbuild.cli.options import common_options, start
               help="Put the test walks on a device with RSS model k*phi + b (e.g. 1.25,-6).")
 @click.option("--raw-imu", is_flag=True,
               help="Write raw phone-IMU signals (imu table, [phone] settings) instead of poses: ingest runs the PDR.")
+@click.option("--print-config", "print_config", is_flag=True,
+              help="Print the simulator's settings (the preset, seed and --config applied) as TOML and stop.")
 @common_options
-def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, config_path, force, quiet, verbose):
+def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, print_config, config_path, force, quiet, verbose):
     """Write a seeded synthetic venue to OUT_DIR: the files `rmbuild ingest OUT_DIR` reads, plus truth/.
 
-    A --config file's [simulate] table is applied on top of the preset (nested tables key by key).
+    The simulator's settings are its own (venue, radio, walkers, sensors): a --config file's [simulate]
+    table is applied on top of the preset (nested tables key by key); --print-config shows them.
     """
     start(verbose, quiet)
     from rmbuild.cli.progress import progress_display
@@ -43,6 +46,13 @@ def simulate(out_dir, preset, seed, fmt, test_device, raw_imu, config_path, forc
         data = to_dict(cfg)
         data.setdefault("devices", {})["test_device"] = [k, b]
         cfg = from_dict(type(cfg), data, "--test-device")
+    if print_config:
+        from rmbuild.config import to_toml
+
+        click.echo(to_toml(cfg, "simulate", comments=True), nl=False)
+        return
+    if out_dir is None:
+        raise click.UsageError("missing argument OUT_DIR")
     with progress_display(quiet, verbose) as progress:
         s = stage.run(out_dir, cfg, fmt=fmt, force=force, progress=progress, raw_imu=raw_imu)
     if not quiet:

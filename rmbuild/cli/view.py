@@ -1,4 +1,4 @@
-"""`rmbuild view`, and the `--rerun` option every stage command can share (:data:`rerun_option`)."""
+"""`rmbuild view`: log a workspace to the rerun viewer (the stages' `--rerun` option: rmbuild.cli.options)."""
 
 from __future__ import annotations
 
@@ -7,30 +7,6 @@ from pathlib import Path
 import click
 
 from rmbuild.cli.options import floor_option, start, workspace_option
-
-#: `--rerun` for stage commands: absent -> no viewer; `--rerun` alone -> "auto" (spawn when a display is
-#: available, else save WORKSPACE/<stage>.rrd); `--rerun spawn|serve|FILE.rrd`.
-rerun_option = click.option(
-    "--rerun", "rerun", default=None, is_flag=False, flag_value="auto", metavar="[spawn|serve|FILE.rrd]",
-    help="Log to rerun while the stage runs: spawn the viewer, serve the web viewer, or save FILE.rrd "
-         "(alone: spawn with a display, else save WORKSPACE/<stage>.rrd).",
-)
-
-
-def rerun_target(value: str | None, workspace: str | Path, stage: str):
-    """The ViewTarget for a stage's ``--rerun`` value (None -> None: the stage gets a NullViewer)."""
-    if value is None:
-        return None
-    from rmbuild.io.workspace import Workspace
-    from rmbuild.viz import ViewTarget, default_target
-
-    if value == "auto":
-        return default_target(Workspace(workspace).path(f"{stage}.rrd"))
-    if value in ("spawn", "serve"):
-        return ViewTarget(value)
-    if not value.endswith(".rrd"):
-        raise click.BadParameter("expected spawn, serve or a path ending in .rrd", param_hint="--rerun")
-    return ViewTarget("save", Path(value))
 
 
 @click.command()

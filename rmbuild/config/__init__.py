@@ -85,16 +85,48 @@ def load_stage_config(
 
 
 def load_stage_config_text(section: str, text: str, where: str) -> Any:
-    """The config of one stage from TOML ``text`` (e.g. the config.toml a stage wrote) over the defaults."""
-    return _resolve(section, text, where, None, None)
+    """The config of one stage from TOML ``text`` (e.g. the config.toml a stage wrote) over the defaults.
+    Tables an earlier rmbuild wrote under their old names (:data:`MOVED_TABLES`) are read at their new place."""
+    return _resolve(section, text, where, None, None, migrate=True)
+
+
+#: tables that moved, old dotted name -> new: a config file naming the old one is an error naming the new;
+#: a config an earlier rmbuild wrote into a workspace is read with the table moved
+MOVED_TABLES: dict[tuple[str, ...], tuple[str, ...]] = {
+    ("pdr", "msft_ilc"): ("ingest", "msft_ilc"),
+    ("pdr", "ipin"): ("ingest", "ipin"),
+    **{("evaluate", name): ("evaluate", "baselines", name)
+       for name in ("slac", "nb", "ssd", "pfl", "smoothing", "ssr", "mll", "smartloc", "hist", "offline_cal")},
+}
+
+
+def _moved(doc: dict[str, Any], text: str, where: str, migrate: bool) -> dict[str, Any]:
+    """``doc`` with the tables of :data:`MOVED_TABLES` at their new place (``migrate``); else a
+    ConfigError at the first old table found."""
+    for old, new in MOVED_TABLES.items():
+        parent: Any = doc
+        for part in old[:-1]:
+            parent = parent.get(part) if isinstance(parent, dict) else None
+        if not isinstance(parent, dict) or old[-1] not in parent:
+            continue
+        if not migrate:
+            line = toml_key_line(text, old)
+            raise ConfigError(f"[{'.'.join(old)}] is now [{'.'.join(new)}]: rename the table",
+                              f"{where}:{line}" if line else where)
+        table = parent.pop(old[-1])
+        target = doc
+        for part in new[:-1]:
+            target = target.setdefault(part, {})
+        target.setdefault(new[-1], table)
+    return doc
 
 
 def _resolve(section: str, text: str | None, where: str | None, overrides: dict[str, Any] | None,
-             base: Any) -> Any:
+             base: Any, migrate: bool = False) -> Any:
     cls = SECTIONS[section]
     data: dict[str, Any] = to_dict(base) if base is not None else {}
     if text is not None and where is not None:
-        doc = parse_toml(text, where)
+        doc = _moved(parse_toml(text, where), text, where, migrate)
         unknown = sorted(set(doc) - set(SECTIONS))
         if unknown:
             line = toml_key_line(text, (unknown[0],))
@@ -123,6 +155,7 @@ def _merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 
 
 __all__ = [
+    "MOVED_TABLES",
     "SECTIONS",
     "BuildConfig",
     "EvaluateConfig",

@@ -293,19 +293,26 @@ def field_comments(cls: type) -> dict[str, list[str]]:
     return out
 
 
-def to_toml(cfg: Any, section: str, comments: bool = False) -> str:
+def to_toml(cfg: Any, section: str, comments: bool = False, keys: frozenset[str] | None = None) -> str:
     """Serialise a config dataclass (nested dataclasses become sub-tables) as TOML text.
 
     ``comments``: put each field's source comment (unit, meaning, the paper's value) and its range above it.
+    ``keys``: only these settings (dotted names below ``section``, ``"odometry.mu"``), and only the tables
+    that hold one of them; None: every setting.
     """
     lines: list[str] = []
-    nested: list[tuple[str, Any]] = []
+    nested: list[tuple[str, Any, frozenset[str] | None]] = []
     notes = field_comments(type(cfg)) if comments else {}
     lines.append(f"[{section}]")
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
         if dataclasses.is_dataclass(v):
-            nested.append((f"{section}.{f.name}", v))
+            sub = None if keys is None else frozenset(k.split(".", 1)[1] for k in keys
+                                                      if k.startswith(f"{f.name}."))
+            if sub is None or sub:
+                nested.append((f"{section}.{f.name}", v, sub))
+            continue
+        if keys is not None and f.name not in keys:
             continue
         lines.extend(f"# {c}" for c in notes.get(f.name, []))
         if comments and (r := field_range(f)) is not None:
@@ -315,8 +322,8 @@ def to_toml(cfg: Any, section: str, comments: bool = False) -> str:
         else:
             lines.append(f"{f.name} = {_toml_value(v)}")
     text = "\n".join(lines) + "\n"
-    for sub, v in nested:
-        text += "\n" + to_toml(v, sub, comments)
+    for name, v, sub in nested:
+        text += "\n" + to_toml(v, name, comments, sub)
     return text
 
 
@@ -341,9 +348,3 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
     return conv(cfg)
 
-
-def with_overrides(cfg: T, where: str = "option", **overrides: Any) -> T:
-    """A copy of ``cfg`` with top-level fields replaced, type-checked and validated like a file."""
-    data = to_dict(cfg)
-    data.update({k: v for k, v in overrides.items()})
-    return from_dict(type(cfg), data, where)

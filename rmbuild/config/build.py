@@ -45,9 +45,9 @@ class BuildConfig:
     # this process, one after the other); "local" or "local:N" (a Dask cluster of N worker processes on this
     # machine; N default: one per core, at most one per floor); "tcp://HOST:PORT" (a running Dask scheduler,
     # `dask scheduler` / `dask worker`). A single-floor input (without --venues) runs in this process.
-    # Default serial: on an idle 2-core machine local:2 is 1.15-1.19x faster on buildings of 2-3 floors
-    # (their serial ingest and unequal floors cap it at 1.38-1.45x), no faster when the cores are busy, and
-    # needs a worker's memory per floor (docs/scale-out.md); a cluster pays with free cores and many floors.
+    # Default serial: it starts no processes and on a small shared machine local is hardly faster, while it
+    # needs a worker's memory per floor (docs/notes/scale-out.md); a cluster pays with free cores and many
+    # floors.
     scheduler: str = "serial"
     # GB; memory limit of each local worker process (Dask restarts a worker above it and the floor fails);
     # 0: the machine's memory shared equally by the workers. Cluster workers set theirs (`dask worker

@@ -1,23 +1,13 @@
-"""Config of `rmbuild evaluate` and of the fingerprint localizers (docs/localizers.md)."""
+"""Config of `rmbuild evaluate` and of kNN (docs/localizers.md); the paper baselines' settings are
+:mod:`rmbuild.baselines.config` (docs/baselines.md)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Literal
 
+from rmbuild.baselines.config import BaselinesConfig
 from rmbuild.config.base import bounded, check_ranges
-from rmbuild.config.localize import (
-    BayesConfig,
-    HistogramLocConfig,
-    MllConfig,
-    OfflineCalibrationConfig,
-    PflConfig,
-    SlacConfig,
-    SmartLocatorConfig,
-    SmoothingConfig,
-    SsdConfig,
-    SsrConfig,
-)
 
 
 @dataclass(frozen=True)
@@ -62,18 +52,8 @@ class EvaluateConfig:
     # competition's and the Kaggle Indoor Location & Navigation metric's 15 m).
     floor_penalty_m: float = bounded(15.0, 0.0, 1000.0)
     knn: KnnConfig = field(default_factory=KnnConfig)
-    # the other localizers (docs/localizers.md): SLAC (He et al. 2015), naive Bayes (Becker et al. 2015), SSD,
-    # PFL, and the Kalman post-filter of the *_kf variants (subway-station paper)
-    slac: SlacConfig = field(default_factory=SlacConfig)
-    nb: BayesConfig = field(default_factory=BayesConfig)
-    ssd: SsdConfig = field(default_factory=SsdConfig)
-    pfl: PflConfig = field(default_factory=PflConfig)
-    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
-    ssr: SsrConfig = field(default_factory=SsrConfig)
-    mll: MllConfig = field(default_factory=MllConfig)
-    smartloc: SmartLocatorConfig = field(default_factory=SmartLocatorConfig)
-    hist: HistogramLocConfig = field(default_factory=HistogramLocConfig)
-    offline_cal: OfflineCalibrationConfig = field(default_factory=OfflineCalibrationConfig)
+    # the paper baselines' settings (rmbuild.baselines; docs/baselines.md)
+    baselines: BaselinesConfig = field(default_factory=BaselinesConfig)
 
     def validate(self) -> None:
         if not self.localizers:
@@ -82,6 +62,4 @@ class EvaluateConfig:
         if not 0 <= self.split_offset < self.split_every:
             raise ValueError("split_offset must be in [0, split_every)")
         self.knn.validate()
-        for sub in (self.slac, self.nb, self.ssd, self.pfl, self.smoothing, self.ssr, self.mll, self.smartloc,
-                    self.hist, self.offline_cal):
-            sub.validate()
+        self.baselines.validate()

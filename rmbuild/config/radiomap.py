@@ -1,4 +1,4 @@
-"""Config of `rmbuild export-map` (docs/localizers.md for the histogram layer)."""
+"""Config of `rmbuild export-map` (docs/baselines.md for the histogram layer)."""
 
 from __future__ import annotations
 

@@ -124,8 +124,8 @@ def landmark_error_unlinked_at_raw(raw_poses: pd.DataFrame, opt_poses: pd.DataFr
     mine = fixes["walk_id"].astype(str).isin([str(w) for w in linked]).to_numpy()
     if mine.all():
         return None
-    R_o, t_o = _alignment(opt_poses, dataset, linked) if align else (np.eye(2), np.zeros(2))
-    R_r, t_r = _alignment(raw_poses, dataset, None)
+    R_o, t_o = metric_alignment(opt_poses, dataset, linked) if align else (np.eye(2), np.zeros(2))
+    R_r, t_r = metric_alignment(raw_poses, dataset, None)
     err = np.r_[fix_errors(opt_poses, fixes[mine], R_o, t_o), fix_errors(raw_poses, fixes[~mine], R_r, t_r)]
     return _fix_stats(err)
 
@@ -174,7 +174,7 @@ def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_
     """
     truth = _truth_per_pose(dataset, poses_df)
     fixes = getattr(dataset, "fixes", None)
-    world_R, world_t = _alignment(poses_df, dataset, fit_walks) if align else (np.eye(2), np.zeros(2))
+    world_R, world_t = metric_alignment(poses_df, dataset, fit_walks) if align else (np.eye(2), np.zeros(2))
     out: dict = {"ate_m": None, "landmark_error_m": None, "heading_alignment_error_deg": None}
     if truth is not None:
         est = poses_df[["x_m", "y_m"]].to_numpy(float) @ world_R.T + world_t
@@ -195,7 +195,7 @@ def _truth_per_pose(dataset, poses_df: pd.DataFrame) -> pd.DataFrame | None:
     return truth if truth is not None and 0 < len(truth) == len(poses_df) else None
 
 
-def _alignment(poses_df: pd.DataFrame, dataset, fit_walks) -> tuple[np.ndarray, np.ndarray]:
+def metric_alignment(poses_df: pd.DataFrame, dataset, fit_walks) -> tuple[np.ndarray, np.ndarray]:
     """One SE(2) (R, t) onto the truth for all walks, fitted on the walks named in ``fit_walks`` (None:
     all; all too when fewer than 2 points are named): on the truth poses when there is one per pose,
     else on the fixes; identity when neither gives 2 points."""

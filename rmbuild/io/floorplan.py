@@ -1,7 +1,7 @@
 """Floor plans on disk: a user's GeoJSON (``rmbuild ingest --floorplan``, with the raster image it may name)
 and the workspace's copy.
 
-The workspace keeps the plan in local metres (``data/floorplan.geojson``, :func:`rmbuild.floorplan.to_geojson`)
+The workspace keeps the plan in local metres (``data/floorplan.local.json``, :func:`rmbuild.floorplan.to_geojson`)
 whatever it came as, so later stages never re-project it. :func:`check_plan_frame` tells whether a plan is in the
 frame of the data's fixes (ingest reports it, optimize does not use a plan that fails it).
 """

@@ -114,17 +114,7 @@ def read_set(db: str | Path, month: int, name: str) -> UjiSet:
         i = int(np.argmax(stamp.isna()))
         raise InputError(f"not a YYYYMMDDhhmmssmmm time: {int(tms[i])}", f"{_file(d, name, 'tms')}:{i + 1}")
     t_s = (stamp - pd.Timestamp("1970-01-01")).total_seconds().to_numpy(dtype=np.float64)
-    width = max(3, len(str(rss.shape[1])))
-    bssids = np.array([f"WAP{j + 1:0{width}d}" for j in range(rss.shape[1])], dtype=object)
+    bssids = np.array([f"WAP{j + 1:03d}" for j in range(rss.shape[1])], dtype=object)
     return UjiSet(month, name, rss32, crd[:, :2].copy(), crd[:, 2].astype(np.int64), t_s, ids.astype(np.int64),
                   bssids)
 
-
-def read_sets(db: str | Path, month: int, kind: str) -> UjiSet:
-    """Every set of one kind ("trn" or "tst") of a month, stacked (``name`` "trn*" / "tst*")."""
-    parts = [read_set(db, month, n) for n in set_names(db, month, kind)]
-    if not parts:
-        raise InputError(f"no {kind} sets", str(month_dir(db, month)))
-    return UjiSet(month, f"{kind}*", np.vstack([p.rss_dbm for p in parts]), np.vstack([p.xy for p in parts]),
-                  np.concatenate([p.floor for p in parts]), np.concatenate([p.t_s for p in parts]),
-                  np.concatenate([p.ids for p in parts]), parts[0].bssids)

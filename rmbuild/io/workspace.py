@@ -8,7 +8,8 @@ Layout (one directory per project; every table is Parquet)::
                                truth/
       optimize/                optimised poses, vicinity pairs, per-walk report, tum/*.txt (+ tum/walks.csv;
                                tum/truth/*.txt: the true paths, same file names, when the input had them)
-      map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures
+      map/                     radio map tables, UJIIndoorLoc-style CSV, sidecar JSON, PNG pictures,
+                               evo/: the map's walks and their truth as TUM files on one clock
       evaluate/                per-scan errors, CDF plot
       <stage dir>/report.json  the stage's machine-readable summary
       <stage dir>/config.toml  the resolved config the stage ran with
@@ -17,7 +18,7 @@ Layout (one directory per project; every table is Parquet)::
       report.html, report/     `rmbuild report` (HTML page and its PNGs)
       view.rrd, <stage>.rrd    rerun recordings (`rmbuild view`, `--rerun`)
       build_state.json         `rmbuild build`: its inputs' fingerprint, each floor's configs and result
-                               (what a re-run may skip; rmbuild.stages.build_state)
+                               (what a re-run may skip; rmbuild.stages.building.state)
 
 A building (several floors) is a workspace whose manifest lists its floors; each floor is a whole
 single-floor workspace of the layout above, and the building keeps only the totals over its floors::
@@ -100,7 +101,8 @@ ARTEFACTS: dict[str, str] = {
     "data.truth_users": "data/truth/users.parquet",
     "data.truth_landmarks": "data/truth/landmarks.parquet",
     "data.truth_beacons": "data/truth/beacons.parquet",
-    "data.floorplan": "data/floorplan.geojson",
+    # local metres: GeoJSON-shaped but not RFC 7946 GeoJSON (whose coordinates are WGS84 lon/lat), hence .json
+    "data.floorplan": "data/floorplan.local.json",
     "data.floor_image": "data/floor_image.png",
     # optimize
     "optimize.poses": "optimize/poses.parquet",
@@ -128,6 +130,11 @@ ARTEFACTS: dict[str, str] = {
     "map.ble_wide_csv_aps": "map/radiomap_ble_uji_aps.csv",
     "map.ble_sidecar": "map/radiomap_ble.json",
     "map.coverage_png": "map/coverage.png",
+    "map.evo_map": "map/evo/map.txt",
+    "map.evo_truth": "map/evo/truth.txt",
+    "map.evo_waypoints": "map/evo/waypoints.txt",
+    "map.evo_map_at_waypoints": "map/evo/map_at_waypoints.txt",
+    "map.evo_clock": "map/evo/clock.csv",
     "map.heatmaps_png": "map/heatmaps.png",
     # evaluate
     "evaluate.errors": "evaluate/errors.parquet",
@@ -139,6 +146,8 @@ ARTEFACTS: dict[str, str] = {
     "view.rrd": "view.rrd",
     "build.state": "build_state.json",
 }
+#: artefacts an earlier rmbuild wrote under another name, read there when the new name is absent
+LEGACY_ARTEFACTS = {"data.floorplan": "data/floorplan.geojson"}
 for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.report"] = f"{_dir}/{REPORT}"
     ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
@@ -392,7 +401,11 @@ class Workspace:
             )
 
     def path(self, key: str) -> Path:
-        return self.root / ARTEFACTS[key]
+        p = self.root / ARTEFACTS[key]
+        old = LEGACY_ARTEFACTS.get(key)
+        if old is not None and not p.exists() and (self.root / old).exists():  # written by an earlier rmbuild
+            return self.root / old
+        return p
 
     def exists(self, key: str) -> bool:
         return self.path(key).exists()
@@ -443,7 +456,7 @@ class Workspace:
         except OSError as e:
             raise WorkspaceError(f"{p}: unreadable ({e.strerror})") from None
         if stage is not None:
-            self._verify(stage, ARTEFACTS[key], data)
+            self._verify(stage, p.relative_to(self.root).as_posix(), data)
         return data
 
     def _verify(self, stage: str, rel: str, data: bytes) -> None:
@@ -591,8 +604,9 @@ def _resolved_root(root: str | Path) -> Path:
 
 
 #: what commands write inside a workspace besides its stage directories, relative to its root: the report
-#: page, its figures' folder, and rerun recordings (``*.rrd``)
-OUTPUTS_IN_WORKSPACE = ("report.html", "report")
+#: page, and rerun recordings (``*.rrd``); and the folders of the report's figures and floor pages
+OUTPUTS_IN_WORKSPACE = ("report.html",)
+OUTPUT_DIRS_IN_WORKSPACE = ("report", "report_figures", "report_floors")
 
 
 def check_outside_workspace(path: str | Path, what: str = "output") -> None:
@@ -610,7 +624,7 @@ def check_outside_workspace(path: str | Path, what: str = "output") -> None:
             continue
         parts = full.relative_to(ws).parts
         ok = (len(parts) == 1 and (parts[0] in OUTPUTS_IN_WORKSPACE or parts[0].endswith(".rrd"))) or \
-            (len(parts) == 2 and parts[0] == ARTEFACTS["report.png_dir"])
+            (len(parts) >= 2 and parts[0] in OUTPUT_DIRS_IN_WORKSPACE)
         if not ok:
             raise InputError(f"{what} {p} lies among the files of workspace {ws} ({parts[0]}), which only rmbuild's "
                              "stages write; write it outside the workspace (or as its report.html, report/ or "

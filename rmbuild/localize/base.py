@@ -186,12 +186,16 @@ def checked(cfg, default_cls: type):
 
 
 def sub_config(cfg, name: str, cls: type):
-    """The localizer's own config from ``cfg``: an instance of ``cls`` as is, an EvaluateConfig's field
-    ``name`` when it has one, else ``cls()``."""
+    """A baseline's own config from ``cfg``: an instance of ``cls`` as is, the table ``name`` of an
+    EvaluateConfig's ``baselines`` (or of a BaselinesConfig), else ``cls()``."""
+    from rmbuild.config.evaluate import EvaluateConfig
+
     if cfg is None:
         return cls()
     if isinstance(cfg, cls):
         return cfg
+    if isinstance(cfg, EvaluateConfig):
+        cfg = cfg.baselines
     sub = getattr(cfg, name, None)
     return sub if isinstance(sub, cls) else cls()
 

@@ -17,7 +17,7 @@ import numpy as np
 FILL_DBM = -110.0
 #: reference fingerprints averaged per floor (the kNN localizer's default K)
 K_NEAREST = 3
-#: dB: distance gap turning into a likelihood ratio of e. 5, 10, 20 dB measured (docs/floors.md): the same on
+#: dB: distance gap turning into a likelihood ratio of e. 5, 10, 20 dB measured (docs/notes/floors.md): the same on
 #: the ILC sites; on synthetic buildings 10 beats 5 (e.g. 96.3 vs 95.4 % at 10 dB floor attenuation) and
 #: 20 more so, but 20 is slower to follow a floor change (90 % of changes within 2 scans, vs 1 at 10)
 TAU_DB = 10.0

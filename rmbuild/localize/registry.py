@@ -1,4 +1,5 @@
-"""The localizer registry: name -> implementing class and a one-line description.
+"""The localizer registry: name -> implementing class and a one-line description; the localizers rmbuild
+offers (kNN, distance-weighted kNN) apart from the paper baselines of :mod:`rmbuild.baselines`.
 
 No heavy imports here (the CLI builds its ``--localizer`` choices and help from it); classes are imported
 only when :func:`rmbuild.localize.base.localizer_class` asks for one. Each class provides
@@ -7,31 +8,38 @@ only when :func:`rmbuild.localize.base.localizer_class` asks for one. Each class
 
 from __future__ import annotations
 
-#: name -> ("module:Class", what it is). Explicit: a new localizer is one line here.
-REGISTRY: dict[str, tuple[str, str]] = {
+#: name -> ("module:Class", what it is): the localizers rmbuild offers. Explicit: a new one is one line here.
+LOCALIZERS_OFFERED: dict[str, tuple[str, str]] = {
     "knn": ("rmbuild.localize.knn:KnnLocalizer", "FL / kNN: mean of the K RPs nearest in RSS space"),
     "wknn": ("rmbuild.localize.knn:WeightedKnnLocalizer", "distance-weighted kNN"),
-    "uiloc": ("rmbuild.localize.uiloc:UilocLocalizer",
-              "UILoc: kNN and least-squares multilateration fused by exp(-distance) weights"),
-    "nb": ("rmbuild.localize.bayes:NaiveBayesLocalizer", "naive Bayes, Gaussian kernel per AP (SmartLocator)"),
-    "ssd": ("rmbuild.localize.ssd:SsdLocalizer", "signal-strength differences between APs (offset-free)"),
-    "ssr": ("rmbuild.localize.ssd:SsrLocalizer", "signal-strength ratios between APs (gain-free)"),
-    "hist": ("rmbuild.localize.histogram:HistogramLocalizer", "RSS-histogram fingerprints, mark selection"),
-    "hist_dir": ("rmbuild.localize.histogram:DirectionHistogramLocalizer",
-                 "direction-aware RSS-histogram fingerprints (uses steps)"),
-    "mll": ("rmbuild.localize.mll:MllLocalizer", "maximum likelihood of Wi-Fi and walked distance over a window"),
-    "pfl": ("rmbuild.localize.pfl:PflLocalizer", "particle filter: PDR steps + kNN fixes"),
-    "slac": ("rmbuild.localize.slac:SlacLocalizer", "SLAC: joint localization and device/step calibration"),
-    "smartloc": ("rmbuild.localize.smartloc:SmartLocator", "SmartLocator: auto-adaptive fusion of fixes and PDR"),
-    "smartloc_static": ("rmbuild.localize.smartloc:StaticSmartLocator",
-                        "SmartLocator's static-weight fusion (the paper's comparison)"),
-    "offline_cal": ("rmbuild.localize.calibration:OfflineCalibrated",
-                    "a localizer on scans mapped by a device model k, b fitted offline"),
-    "knn_kf": ("rmbuild.localize.smoothing:KnnKalman", "kNN, Kalman-smoothed with PDR"),
-    "nb_kf": ("rmbuild.localize.smoothing:NaiveBayesKalman", "naive Bayes, Kalman-smoothed with PDR"),
-    "ssd_kf": ("rmbuild.localize.smoothing:SsdKalman", "SSD, Kalman-smoothed with PDR"),
-    "slac_kf": ("rmbuild.localize.smoothing:SlacKalman", "SLAC, Kalman-smoothed with PDR"),
 }
+
+#: the paper baselines (:mod:`rmbuild.baselines`), runnable by name beside them (docs/baselines.md)
+BASELINES: dict[str, tuple[str, str]] = {
+    "uiloc": ("rmbuild.baselines.uiloc:UilocLocalizer",
+              "UILoc: kNN and least-squares multilateration fused by exp(-distance) weights"),
+    "nb": ("rmbuild.baselines.bayes:NaiveBayesLocalizer", "naive Bayes, Gaussian kernel per AP (SmartLocator)"),
+    "ssd": ("rmbuild.baselines.ssd:SsdLocalizer", "signal-strength differences between APs (offset-free)"),
+    "ssr": ("rmbuild.baselines.ssd:SsrLocalizer", "signal-strength ratios between APs (gain-free)"),
+    "hist": ("rmbuild.baselines.histogram:HistogramLocalizer", "RSS-histogram fingerprints, mark selection"),
+    "hist_dir": ("rmbuild.baselines.histogram:DirectionHistogramLocalizer",
+                 "direction-aware RSS-histogram fingerprints (uses steps)"),
+    "mll": ("rmbuild.baselines.mll:MllLocalizer", "maximum likelihood of Wi-Fi and walked distance over a window"),
+    "pfl": ("rmbuild.baselines.pfl:PflLocalizer", "particle filter: PDR steps + kNN fixes"),
+    "slac": ("rmbuild.baselines.slac:SlacLocalizer", "SLAC: joint localization and device/step calibration"),
+    "smartloc": ("rmbuild.baselines.smartloc:SmartLocator", "SmartLocator: auto-adaptive fusion of fixes and PDR"),
+    "smartloc_static": ("rmbuild.baselines.smartloc:StaticSmartLocator",
+                        "SmartLocator's static-weight fusion (the paper's comparison)"),
+    "offline_cal": ("rmbuild.baselines.calibration:OfflineCalibrated",
+                    "a localizer on scans mapped by a device model k, b fitted offline"),
+    "knn_kf": ("rmbuild.baselines.smoothing:KnnKalman", "kNN, Kalman-smoothed with PDR"),
+    "nb_kf": ("rmbuild.baselines.smoothing:NaiveBayesKalman", "naive Bayes, Kalman-smoothed with PDR"),
+    "ssd_kf": ("rmbuild.baselines.smoothing:SsdKalman", "SSD, Kalman-smoothed with PDR"),
+    "slac_kf": ("rmbuild.baselines.smoothing:SlacKalman", "SLAC, Kalman-smoothed with PDR"),
+}
+
+#: every name ``--localizer`` takes
+REGISTRY: dict[str, tuple[str, str]] = {**LOCALIZERS_OFFERED, **BASELINES}
 
 
 def localizer_names() -> list[str]:
@@ -40,5 +48,6 @@ def localizer_names() -> list[str]:
 
 
 def describe() -> str:
-    """"name (what it is), ..." for help texts."""
-    return "; ".join(f"{n}: {d}" for n, (_, d) in REGISTRY.items())
+    """The offered localizers with what they are, then the baselines' names, for help texts."""
+    offered = "; ".join(f"{n}: {d}" for n, (_, d) in LOCALIZERS_OFFERED.items())
+    return f"{offered}; paper baselines (docs/baselines.md): {', '.join(BASELINES)}"

@@ -2,7 +2,7 @@
 
 Entry points: :func:`run_pdr` (phone IMU -> :class:`PdrResult`: poses and a per-walk report) and
 :func:`poses_from_increments` (foot-IMU step increments). Settings: :class:`rmbuild.config.pdr.PdrConfig`.
-Method and measured accuracy: docs/formats-real.md.
+Method and measured accuracy: docs/notes/formats-real.md.
 """
 
 from __future__ import annotations

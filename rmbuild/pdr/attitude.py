@@ -2,7 +2,7 @@
 
 The yaw that matters for walking is the rotation about the *world* vertical, whatever the phone's tilt:
 ``yaw_rate = up · (ω − b)`` with ``up`` the unit gravity direction in the device frame and ``b`` the gyro
-bias. Two things make this hard on real phones (measured on the IPIN 2023 logfiles, docs/formats-real.md):
+bias. Two things make this hard on real phones (measured on the IPIN 2023 logfiles, docs/notes/formats-real.md):
 
 - **Bias**: Android's "calibrated" gyroscope still carried 2-5 °/s on some Samsung walks (a 300° turn over a
   4-minute walk). :func:`gyro_bias` takes it from the rotation vector when the phone records one (the rate

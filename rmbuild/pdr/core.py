@@ -2,81 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
-import pandas as pd
 
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.geometry import wrap
 from rmbuild.pdr.heading import interval_mean
 from rmbuild.pdr.length import step_lengths, step_swings
 from rmbuild.pdr.quality import PdrReport, assess
+from rmbuild.pdr.signals import ImuSignals, StepPoses
 from rmbuild.pdr.steps import GaitWindows, bandpassed_magnitude, gait_windows, pick_steps
 from rmbuild.pdr.timebase import TimeIssue, dropouts, main_block, resample, uniform_grid, within
 from rmbuild.pdr.yaw import relative_yaw
 
 #: m/s²; RMS of the band-passed acceleration magnitude below which a gait window is standing. Measured on
-#: the IPIN 2023 and ILC 2.0 phones: standing 0.02-0.1, the gentlest walking 0.5-1 (docs/formats-real.md)
+#: the IPIN 2023 and ILC 2.0 phones: standing 0.02-0.1, the gentlest walking 0.5-1 (docs/notes/formats-real.md)
 MIN_WALK_RMS_MPS2 = 0.25
-
-
-@dataclass
-class ImuSignals:
-    """Raw IMU series of one walk, each sorted by time (s, one common clock).
-
-    ``acc_mps2``: (n, 3) accelerometer (specific force, device frame). ``yaw_abs_rad``: (m,) absolute yaw
-    (ENU, CCW from east) at ``t_yaw_s`` from the rotation vector / AHRS, with Android accuracy flags
-    ``yaw_accuracy`` (m,) int (0..3; -1 = unknown) and, when recorded, the orientation itself ``quat_xyzw``
-    (m, 4) (device -> ENU; else shape (0, 4)). ``gyro_radps``: (k, 3) body rates (device frame).
-    Missing series are empty arrays.
-    """
-
-    t_acc_s: np.ndarray
-    acc_mps2: np.ndarray
-    t_yaw_s: np.ndarray
-    yaw_abs_rad: np.ndarray
-    yaw_accuracy: np.ndarray
-    t_gyro_s: np.ndarray
-    gyro_radps: np.ndarray
-    quat_xyzw: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-
-
-@dataclass
-class StepPoses:
-    """Per-step poses of one walk; row 0 is the start (t0, 0, 0, heading 0), row k the pose after step k.
-
-    All arrays (k + 1,): ``t_s`` s; ``x_m``, ``y_m`` m and ``heading_rad`` (CCW, relative to the start) in the
-    walk's own frame; ``yaw_abs_rad`` absolute yaw of that step (NaN when unknown) with 1-sigma
-    ``yaw_abs_sigma_rad``; ``step_freq_hz`` (NaN for row 0); ``step_length_m`` (0 for row 0).
-    """
-
-    t_s: np.ndarray
-    x_m: np.ndarray
-    y_m: np.ndarray
-    heading_rad: np.ndarray
-    yaw_abs_rad: np.ndarray
-    yaw_abs_sigma_rad: np.ndarray
-    step_freq_hz: np.ndarray
-    step_length_m: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.t_s)
-
-    def to_frame(self, walk_id: str) -> pd.DataFrame:
-        """Table with the pose columns of the input schema (walk_id, step, t_s, x_m, ...)."""
-        n = len(self.t_s)
-        return pd.DataFrame({
-            "walk_id": np.full(n, walk_id, dtype=object),
-            "step": np.arange(n, dtype=np.int64),
-            "t_s": self.t_s,
-            "x_m": self.x_m,
-            "y_m": self.y_m,
-            "heading_rad": self.heading_rad,
-            "yaw_abs_rad": self.yaw_abs_rad,
-            "yaw_abs_sigma_rad": self.yaw_abs_sigma_rad,
-            "step_freq_hz": self.step_freq_hz,
-        })
 
 
 @dataclass
@@ -111,7 +53,7 @@ def integrate_increments(t0_s: float, t_s: np.ndarray, dx_m: np.ndarray, dy_m: n
 
 #: step periods; each step's heading is the mean over [t - 1, t + 1] periods: one stride centred on the step
 #: (a swinging phone's yaw oscillates once per stride; a window of the step's own interval, or one stride
-#: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/formats-real.md)
+#: ending at the step, did worse on the ILC 2.0 and IPIN 2023 walks, docs/notes/formats-real.md)
 HEADING_WINDOW_PERIODS = (-1.0, 1.0)
 # deg; the absolute yaw is kept only while the phone's screen faces at most this far from up (held in front,
 # flat to pitched up: MS ILC traces 0-14°, IPIN 93 % of the samples; a phone at the ear, swinging in a hand
@@ -164,7 +106,7 @@ def _not_in_front(imu: ImuSignals, t0: float, w0: np.ndarray, w1: np.ndarray) ->
     than IN_FRONT_MAX_TILT_DEG away from up (the mean specific force over the step's interval). The
     absolute yaw is the azimuth of the phone's forward axis (:func:`rmbuild.pdr.heading.yaw_from_quat`),
     which is the walking direction only for a phone held in front; at the ear, in a swinging hand or in a
-    pocket it is off by 55-168° (docs/formats-real.md)."""
+    pocket it is off by 55-168° (docs/notes/formats-real.md)."""
     t = np.asarray(imu.t_acc_s, dtype=np.float64)
     a = np.asarray(imu.acc_mps2, dtype=np.float64)
     lo, hi = np.r_[t0, w0], np.r_[min(t0 + 1.0, float(t[-1])), w1]

@@ -10,7 +10,7 @@
   gait and way of carrying the phone.
 
 Weinberg's single exponent 1/4 mixes two things that behave differently (measured on the ILC 2.0 and
-IPIN 2023 walks, docs/formats-real.md): *between* walkers and phones the swing says little about the
+IPIN 2023 walks, docs/notes/formats-real.md): *between* walkers and phones the swing says little about the
 step (a phone swinging in a hand or held loosely swings far more for the same stride: exponent 0.1), while
 *within* a walk a smaller swing means a slower, shorter step (exponent 0.4, near the inverted pendulum's
 1/2). The per-walk scale error that remains is what the optimizer refines.

@@ -11,7 +11,7 @@ from rmbuild.pdr.steps import HOP_S
 from rmbuild.pdr.timebase import TimeIssue
 
 if TYPE_CHECKING:
-    from rmbuild.pdr.core import StepPoses
+    from rmbuild.pdr.signals import StepPoses
     from rmbuild.pdr.steps import StepDetection
     from rmbuild.pdr.yaw import YawTrack
 

@@ -41,7 +41,7 @@ HALF_LAG_TOLERANCE = 0.15
 #: a peak within this fraction of the step period of the previous step is the same step
 MIN_STEP_FRACTION = 0.6
 #: a peak needs a prominence of this multiple of its window's RMS of the band-passed magnitude (a sine has
-#: 2.8; chosen on the ILC 2.0 and IPIN 2023 walks and the synthetic carrying modes, docs/formats-real.md)
+#: 2.8; chosen on the ILC 2.0 and IPIN 2023 walks and the synthetic carrying modes, docs/notes/formats-real.md)
 MIN_PROMINENCE_RMS = 1.5
 #: rad/s; RMS rotation rate above which a window is the phone being handled, not carried: a phone swinging
 #: in a walker's hand turns at up to ~3.5 rad/s RMS; the IPIN 2023 walks' compass calibration (waving the
@@ -49,7 +49,7 @@ MIN_PROMINENCE_RMS = 1.5
 HANDLING_RATE_RADPS = 4.0
 #: a window's RMS and autocorrelation clip the band-passed magnitude at this many times its median absolute
 #: value (a sine's peak is 1.4 times it, heel strikes 2-4 times; 3 cost 0.04 m on ILC F1, 5 about 0.01 m:
-#: docs/formats-real.md)
+#: docs/notes/formats-real.md)
 CLIP_MEDIANS = 5.0
 #: s; a grid point is moving when the RMS over this window reaches LOCAL_RMS_FRACTION of its gait window's
 #: RMS (a walker who stops for a second inside a walking window is standing there)

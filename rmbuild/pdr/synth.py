@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rmbuild.config.simulate import CARRY_MODES
-from rmbuild.pdr.core import ImuSignals
+from rmbuild.pdr.signals import ImuSignals
 
 G_MPS2 = 9.80665
 #: Hz; the grid the motion is built on before sampling at the phone's rate

@@ -11,7 +11,7 @@ import numpy as np
 from rmbuild.pdr.attitude import drift_rate, gyro_bias, up_vectors, yaw_about_gravity
 
 if TYPE_CHECKING:
-    from rmbuild.pdr.core import ImuSignals
+    from rmbuild.pdr.signals import ImuSignals
 
 
 @dataclass(frozen=True)

@@ -98,9 +98,6 @@ class RadioMap:
             )
         raise ValueError(f"unknown reference kind {kind!r}")
 
-    def cell_table(self) -> pd.DataFrame:
-        return self.cells.copy()
-
     def long_table(self) -> pd.DataFrame:
         """One row per (cell, detected AP) with :data:`LONG_COLUMNS` (the Parquet table)."""
         r, c = np.nonzero(~np.isnan(self.mean_dbm))
@@ -121,9 +118,9 @@ class RadioMap:
         })
 
     def wap_names(self) -> list[str]:
-        """UJIIndoorLoc-style column names WAP001.. for the map's APs, in ``bssids`` order."""
-        width = max(3, len(str(len(self.bssids))))
-        return [f"WAP{i + 1:0{width}d}" for i in range(len(self.bssids))]
+        """UJIIndoorLoc's column names for the map's APs, in ``bssids`` order: WAP001 .. WAP999 with three digits
+        as in UJIIndoorLoc (its 520 APs are WAP001 .. WAP520), then WAP1000, WAP1001, ... for a map of more."""
+        return [f"WAP{i + 1:03d}" for i in range(len(self.bssids))]
 
     def wide_table(self, layout: str = "uji", floor: int = 0, uji_xy: np.ndarray | None = None) -> pd.DataFrame:
         """One row per cell, one column per AP, +100 = not detected (UJIIndoorLoc's convention).

@@ -42,7 +42,7 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
     icfg, pcfg = ingest_configs(ws)
     progress.phase("reading the new input")
     new = read_input(inputs, fmt, icfg, pcfg)
-    unpinned = unpinned_origin_warning(pcfg, new)
+    unpinned = unpinned_origin_warning(icfg, new)
     if unpinned:
         log.warning(unpinned)
     if new.kind != "walks":

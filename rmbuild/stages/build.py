@@ -1,6 +1,6 @@
 """`rmbuild build`: the whole pipeline in one command (docs/scale-out.md).
 
-ingest (in this process) → per floor, as one task each (:mod:`rmbuild.stages.floor_task`): optimize,
+ingest (in this process) → per floor, as one task each (:mod:`rmbuild.stages.building.task`): optimize,
 export-map, evaluate when the floor has ground truth, report → the building's reports (this process, under
 the building's lock, once every floor is done). The floors run in this process one after the other
 (``serial``) or as Dask tasks (:mod:`rmbuild.stages.dask_run`); a failed floor is reported with its error
@@ -31,7 +31,7 @@ from rmbuild.io.workspace import (
     check_output_file,
     check_replaceable,
 )
-from rmbuild.stages.build_state import (
+from rmbuild.stages.building.state import (
     STATE_VERSION,
     floor_is_current,
     hand_made,
@@ -42,9 +42,7 @@ from rmbuild.stages.build_state import (
     stage_records,
     write_state,
 )
-from rmbuild.stages.common import Progress, ensure_progress
-from rmbuild.stages.dask_run import Runner, executor
-from rmbuild.stages.floor_task import (
+from rmbuild.stages.building.task import (
     TASK_SECTIONS,
     building_reports_task,
     import_floor_modules,
@@ -52,6 +50,8 @@ from rmbuild.stages.floor_task import (
     run_floor,
     write_building_reports,
 )
+from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.dask_run import Runner, executor
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +70,7 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
         on_cluster: Any = None) -> dict:
     """Ingest ``inputs`` into ``workspace`` and run every floor's stages; ``cfgs``: section -> config of
     each of :data:`SECTIONS`. Without ``force``, a workspace an earlier `build` made is brought up to date:
-    unchanged inputs are not ingested again and unchanged floors not re-run (:mod:`rmbuild.stages.build_state`).
+    unchanged inputs are not ingested again and unchanged floors not re-run (:mod:`rmbuild.stages.building.state`).
     Returns the build report (:func:`run_floors_as_tasks`) with ``ingest``."""
     t0 = time.perf_counter()
     sched = parse_scheduler(cfgs["build"].scheduler)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -40,16 +39,6 @@ class NullProgress:
 
 def ensure_progress(p: Progress | None) -> Progress:
     return NullProgress() if p is None else p
-
-
-@contextmanager
-def timed(times: dict[str, float], key: str) -> Iterator[None]:
-    """Add the wall time of the block to ``times[key]`` (seconds)."""
-    t0 = time.perf_counter()
-    try:
-        yield
-    finally:
-        times[key] = round(times.get(key, 0.0) + time.perf_counter() - t0, 4)
 
 
 ProgressCallback = Callable[[str, dict], None]

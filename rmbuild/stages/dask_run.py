@@ -24,7 +24,7 @@ CONNECT_TIMEOUT_S = 30
 #: BLAS): one BLAS / OpenMP thread per worker, as each worker runs one floor on one core (Dask's default
 #: too). Dask's default also sets MALLOC_TRIM_THRESHOLD_=65536 (freed memory handed back to the system at
 #: once): it doubled a floor task's system time (~1.5 s more of ~18 s of CPU on MS ILC site2 B1, paired
-#: runs in docs/scale-out.md): left out.
+#: runs in docs/notes/scale-out.md): left out.
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: Dask config of a local cluster: the environment above, no statistical profiler in the workers (it
 #: samples the running task's stack every 10 ms under the GIL: ~5% of a floor task's CPU time, same runs);

@@ -35,10 +35,10 @@ def run(
 ) -> tuple[dict, str]:
     """Evaluate; returns (the evaluate report, a short text table). ``map_cfg`` None: the config export-map
     ran with (the defaults when it has not run). A building: every floor (or the one ``floor`` names), then
-    the floor classification of the test scans (:mod:`rmbuild.stages.floor_eval`)."""
+    the floor classification of the test scans (:mod:`rmbuild.stages.building.evaluate`)."""
     floors = floor_workspaces(workspace, floor)
     if floors is not None:
-        from rmbuild.stages.floor_eval import run_building
+        from rmbuild.stages.building.evaluate import run_building
 
         no_viewer_for_building(viewer, floors)
         if test_walks and len(floors) > 1:

@@ -73,11 +73,12 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     walls = plan_segments(ds.venue, plan_doc) if info["frame"] == "building" else None  # drawn in the pictures
     progress.phase("writing map")
     georef, plan_name, _, _ = find_georef(ws, rm.frame)
-    floor = level_of_floor(ws.root) or 0
+    floor = floor_number(ws)
     with ws.writing("map") as w:
         _write_wifi(w, ws, rm, cfg, info, walls, georef, plan_name, floor)
         ble_report = _write_ble(w, ble_rm, info, floor, georef) if ble_rm is not None else ble_skipped
         report = _report(rm, cfg, info, georef, _plan_coverage(plan_doc, rm) if walls is not None else None)
+        report["evo"] = _write_evo(w, ws, ds, xy, info, rm.frame)
         report["time_s"] = {"build": round(t_build, 3), "total": round(time.perf_counter() - t0, 3)}
         if ble_report is not None:
             report["ble"] = ble_report
@@ -104,6 +105,34 @@ def _positions(ws: Workspace, ds, cfg: MapConfig, anchors_path: str | Path | Non
             xy, extra = place_with_anchors(xy, ds, ws.read_table("optimize.poses"), anchors)
             info.update(extra)
     return xy, info
+
+
+def floor_number(ws: Workspace) -> int:
+    """The FLOOR the map's UJIIndoorLoc CSV gives its cells: the floor's level (0 the ground floor, -1 the
+    first basement) from its name, in a building and alone alike; 0 when the name does not say."""
+    from rmbuild.ingest.floors import floor_level
+
+    level = level_of_floor(ws.root)
+    if level is None:
+        name = (ws.read_report("ingest") or {}).get("floor")
+        level = floor_level(name) if isinstance(name, str) else None
+    return level or 0
+
+
+def _write_evo(w: StageWriter, ws: Workspace, ds, xy: np.ndarray, info: dict, frame: str) -> dict:
+    """The map's walks as TUM files for evo on one clock, with their truth (:mod:`rmbuild.stages.map_evo`);
+    returns what the report says of them (the files and the evo commands that score the map)."""
+    from rmbuild.stages.map_evo import evo_recipe, evo_texts
+
+    heading = ws.read_table("optimize.poses")["heading_rad"].to_numpy(dtype=float)
+    if "anchor_fit" in info:  # --anchors turned the map: its headings too
+        heading = heading + np.radians(info["anchor_fit"]["rotation_deg"])
+    texts, clock = evo_texts(ds, xy, heading)
+    for key, text in texts.items():
+        w.text(key, text)
+    w.text("map.evo_clock", clock.to_csv(index=False))
+    return {"files": [ARTEFACTS[k] for k in texts], "clock": ARTEFACTS["map.evo_clock"],
+            "commands": evo_recipe(frame, set(texts))}
 
 
 def _write_wifi(w: StageWriter, ws: Workspace, rm: RadioMap, cfg: MapConfig, info: dict, walls: np.ndarray | None,

@@ -12,9 +12,9 @@ import numpy as np
 from rmbuild.config import IngestConfig, PdrConfig, to_toml
 from rmbuild.errors import InputError
 from rmbuild.floorplan import from_local_geojson, image_extent_m
-from rmbuild.ingest_checks import evidence_warnings
-from rmbuild.ingest_core import build_dataset
-from rmbuild.ingest_floors import floor_level, split_floors
+from rmbuild.ingest.checks import evidence_warnings
+from rmbuild.ingest.core import build_dataset
+from rmbuild.ingest.floors import floor_level, split_floors
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floor_image import attach_image, check_extent, read_image, split_image
 from rmbuild.io.floorplan import check_plan_frame, read_user_plan
@@ -84,7 +84,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
          force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None,
          image: tuple[bytes, list[float] | None] | None) -> dict:
     t0 = time.perf_counter()
-    reader = choose_reader(files, fmt, pdr_cfg)
+    reader = choose_reader(files, fmt)
     progress.phase(f"reading {reader.name}", len(files), "files")
     counted = [0]
 
@@ -96,7 +96,7 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     raw = reader.read(files, cfg)
     progress.advance(len(files) - counted[0])  # readers that do not count files (or skip some) end at N / N
     t_read = time.perf_counter() - t0
-    pdr_cfg = pinned_origin(pdr_cfg, raw)
+    cfg = pinned_origin(cfg, raw)
     floors = split_floors(raw)
     if floors is not None:
         if image is not None:
@@ -113,6 +113,8 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     progress.message(f"{len(ds.walks)} walks, {len(ds.poses):,} poses, {len(ds.wifi):,} Wi-Fi readings")
     t_build = time.perf_counter() - t1
     summary = {"stage": "ingest", "format": reader.name, "inputs": [str(p) for p in inputs], **summary}
+    if raw.floor_name:  # the one floor the input names: its level numbers the floor as in a building
+        summary["floor"] = raw.floor_name
     progress.phase("writing workspace")
     with Workspace.create(workspace, force=force) as w:
         _write(w, ds, fp, plan, cfg, pdr_cfg, reader.name != "rmbuild" or bool(raw.imu))
@@ -125,14 +127,14 @@ def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg
     return summary
 
 
-def pinned_origin(pdr_cfg: PdrConfig, raw: RawInput) -> PdrConfig:
-    """``pdr_cfg`` with the WGS84 origin the reader chose for the fixes' local frame (IPIN's first fix) made
+def pinned_origin(cfg: IngestConfig, raw: RawInput) -> IngestConfig:
+    """``cfg`` with the WGS84 origin the reader chose for the fixes' local frame (IPIN's first fix) made
     explicit, so that the config written beside the data reads later input (``ingest --append``,
     ``localize``) in the same frame; unchanged when the reader chose none."""
     if raw.enu_origin is None:
-        return pdr_cfg
+        return cfg
     lat, lon = raw.enu_origin
-    return replace(pdr_cfg, ipin=replace(pdr_cfg.ipin, origin_lat_deg=lat, origin_lon_deg=lon))
+    return replace(cfg, ipin=replace(cfg.ipin, origin_lat_deg=lat, origin_lon_deg=lon))
 
 
 def _build(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, plan: dict | None,

@@ -103,7 +103,7 @@ def run(
         icfg, pcfg = ingest_configs(ws)
         new = read_input(inputs, fmt, icfg, pcfg)
         ds = new.dataset
-        unpinned = unpinned_origin_warning(pcfg, new)
+        unpinned = unpinned_origin_warning(icfg, new)
         if hold_out:
             progress.phase("building the map of the other walks")
             rm, hold_note = held_out_map(ws, ds)
@@ -127,6 +127,9 @@ def run(
         log.warning(w)
     progress.phase(f"localizing {len(query)} scans with {name}")
     res = localize_query(rm, query, name, cfg)
+    if (outside := _outside_warning(res)) is not None:
+        log.warning(outside)
+        warnings.append(outside)
     table = positions_table(query, res, to_map(ref) if to_map is not None else None)
     write_table(table, out, geo)
     report = {
@@ -136,6 +139,7 @@ def run(
         "scans_without_map_aps": int((res.n_aps == 0).sum()),
         "unlocalized": int((~np.isfinite(res.xy).all(axis=1)).sum()),
         "uncertainty_m_median": _median(res.uncertainty_m), "localizer_summary": res.summary,
+        "outside_map": {"scans": int(res.outside_map.sum()), "threshold_db": res.outside_db},
         "truth": {"present": has_truth, "frame": frame_note if has_truth else None},
         "errors": error_stats(table["error_m"].to_numpy()) if "error_m" in table else None,
         "warnings": warnings, "time_s": round(time.perf_counter() - t0, 3),
@@ -186,6 +190,19 @@ def _overlap_warning(ds: Dataset, rm: RadioMap) -> list[str]:
             f"{' ...' if len(both) > 3 else ''}): their scans are in the map, so their errors are optimistic"]
 
 
+def _outside_warning(res) -> str | None:
+    """A warning when scans match the map worse than its own scans match a neighbouring cell: they were
+    probably taken where the map has no walks, and their positions are guesses inside the map."""
+    n = int(res.outside_map.sum())
+    if not n:
+        return None
+    located = int(np.isfinite(res.xy).all(axis=1).sum())
+    return (f"{n} of {located} scans match the map worse than 99% of the map's own scans match a neighbouring "
+            f"cell (nearest fingerprint more than {res.outside_db:.1f} dB away): they were probably taken outside "
+            "the area the map covers; their positions are guesses inside the map and their uncertainty_m "
+            "understates the error (output column outside_map)")
+
+
 def _median(a: np.ndarray) -> float | None:
     a = a[np.isfinite(a)]
     return float(np.median(a)) if a.size else None
@@ -216,28 +233,28 @@ def ingest_configs(ws: Workspace) -> tuple[IngestConfig, PdrConfig]:
     return load_stage_config_text("ingest", text, where), load_stage_config_text("pdr", text, where)
 
 
-def unpinned_origin_warning(pdr_cfg: PdrConfig, new: NewInput) -> str | None:
+def unpinned_origin_warning(ingest_cfg: IngestConfig, new: NewInput) -> str | None:
     """A warning when new IPIN logfiles with fixes are read against a workspace that does not record the
     WGS84 origin of its own fixes' frame (ingested before ingest wrote it into the config): the new fixes
     then get a frame of their own."""
     fixes = new.dataset.fixes
-    if new.reader != "ipin" or pdr_cfg.ipin.origin_lat_deg is not None or fixes is None or not len(fixes):
+    if new.reader != "ipin" or ingest_cfg.ipin.origin_lat_deg is not None or fixes is None or not len(fixes):
         return None
     return ("the workspace does not record the WGS84 origin of its POSI fixes' frame (ingested before rmbuild "
             "wrote it into data/config.toml): the new fixes are put into a frame of their own; re-ingest the "
-            "workspace, or set pdr.ipin.origin_lat_deg / origin_lon_deg to the origin its ingest notes name")
+            "workspace, or set ingest.ipin.origin_lat_deg / origin_lon_deg to the origin its ingest notes name")
 
 
 def read_input(inputs: list[str | Path], fmt: str | None, ingest_cfg: IngestConfig, pdr_cfg: PdrConfig) -> NewInput:
     """Read walks (any ingest format) or bare scans (rmbuild's schema without poses) into memory."""
-    from rmbuild.ingest_core import build_dataset
+    from rmbuild.ingest.core import build_dataset
     from rmbuild.io.formats import choose_reader, expand_inputs
     from rmbuild.io.scans import are_bare_scans, read_bare_scans
 
     files = expand_inputs(inputs)
     if fmt in (None, "rmbuild") and are_bare_scans(files):
         return NewInput(read_bare_scans(files, ingest_cfg), "scans", "rmbuild", len(files))
-    reader = choose_reader(files, fmt, pdr_cfg)
+    reader = choose_reader(files, fmt)
     raw = reader.read(files, ingest_cfg)
     ds, _, _ = build_dataset(raw, ingest_cfg, source=reader.name, pdr_cfg=pdr_cfg)
     return NewInput(ds, "walks", reader.name, len(files))

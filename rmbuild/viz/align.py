@@ -119,7 +119,7 @@ def per_walk_to_fixes(poses: pd.DataFrame, fixes: pd.DataFrame | None) -> pd.Dat
 
 def plan_segments(venue: dict | None, plan_geojson: dict | None) -> np.ndarray | None:
     """The floor plan as segments (n, 4) x0, y0, x1, y1 in the building frame (m): the venue's walls, or
-    else the boundary of the walkable space of the workspace's plan (``data/floorplan.geojson``); None
+    else the boundary of the walkable space of the workspace's plan (``data/floorplan.local.json``); None
     without either."""
     walls = np.asarray((venue or {}).get("walls") or [], dtype=float).reshape(-1, 4)
     if len(walls):

@@ -10,12 +10,13 @@ a label with its unit. Colour limits come from the data drawn (a -13 dBm peak sh
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from rmbuild.viz.colors import SEQUENTIAL_CMAP, walk_color
+from rmbuild.viz.colors import LINE_COLORS, SEQUENTIAL_CMAP, walk_color
 
 #: Line style of each map in a CDF (colour tells the localizer): built solid, surveyed dashed, raw dotted.
 MAP_LINE_STYLES = {"built": "-", "surveyed": "--", "raw": ":"}
@@ -156,10 +157,28 @@ def _data_norm(values: np.ndarray) -> Any:
     return Normalize(lo, hi if hi > lo else lo + 1.0)
 
 
+def radio_keys(bssid: str) -> tuple[str, ...]:
+    """Keys shared by the virtual BSSIDs of one radio: an access point announces several networks from one
+    radio with MACs that differ in the first octet (the locally administered variants) or in the last hex
+    digit. A BSSID that is not a MAC address is a radio of its own."""
+    octets = bssid.lower().replace("-", ":").split(":")
+    if len(octets) != 6 or not all(len(o) == 2 for o in octets):
+        return (bssid,)
+    return (":".join(octets[1:]), ":".join(octets[:5]) + ":" + octets[5][0])
+
+
 def strongest_aps(cells: pd.DataFrame, top_n: int) -> pd.Series:
-    """The ``top_n`` APs with the highest peak cell mean (dBm), strongest first (ties: first seen)."""
+    """The ``top_n`` APs with the highest peak cell mean (dBm), strongest first (ties: first seen), one per
+    radio (:func:`radio_keys`: its other virtual BSSIDs map the same signal)."""
     peak = cells.groupby("bssid", sort=False)["rssi_mean_dbm"].max().dropna()
-    return peak.sort_values(ascending=False, kind="stable").iloc[:top_n]
+    peak = peak.sort_values(ascending=False, kind="stable")
+    seen: set[str] = set()
+    keep: list[bool] = []
+    for ap in peak.index:
+        keys = radio_keys(str(ap))
+        keep.append(not seen.intersection(keys))
+        seen.update(keys)
+    return peak[np.array(keep, dtype=bool)].iloc[:top_n]
 
 
 def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell_size_m: float | None = None,
@@ -195,30 +214,50 @@ def heatmaps_figure(cells: pd.DataFrame, top_n: int = 6, walls: Any = None, cell
     for ax in list(axes.flat)[len(peak):]:
         ax.set_axis_off()
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.85, label="mean RSSI (dBm)")
-    fig.suptitle(f"the {len(peak)} strongest APs: mean RSSI per {grid.s:g} m cell", fontsize=11)
+    fig.suptitle(f"the {len(peak)} strongest radios: mean RSSI per {grid.s:g} m cell", fontsize=11)
     return fig
+
+
+def _bounds(grid: Grid, walls: np.ndarray | None, image: tuple[np.ndarray, Sequence[float]] | None
+            ) -> tuple[float, float, float, float]:
+    """x0, x1, y0, y1 (m) holding the grid, the walls and the plan's image: the whole plan, not only the
+    part the map covers."""
+    xs, ys = [grid.extent[0], grid.extent[1]], [grid.extent[2], grid.extent[3]]
+    if walls is not None and len(walls):
+        xs += [float(walls[:, [0, 2]].min()), float(walls[:, [0, 2]].max())]
+        ys += [float(walls[:, [1, 3]].min()), float(walls[:, [1, 3]].max())]
+    if image is not None:
+        x0, y0, x1, y1 = image[1]
+        xs += [x0, x1]
+        ys += [y0, y1]
+    return min(xs), max(xs), min(ys), max(ys)
 
 
 def coverage_figure(cells: pd.DataFrame, cell_size_m: float | None = None, walls: Any = None,
                     frame: str | None = None, image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
     """Scans per visited cell (same colour map as the heat maps; log scale from :data:`LOG_COUNT_FROM`
-    scans), cells filled by interpolation in grey, over the plan's ``image`` (pixels, extent m) when given.
+    scans), cells filled by interpolation in grey, over the plan's ``image`` (pixels, extent m) when given;
+    the axes span the whole plan (walls and image), so what the map does not cover shows.
     ``cells``: ix, iy, x_m, y_m, n_scans, interpolated."""
     from matplotlib.colors import LogNorm, Normalize
 
     grid = Grid(cells, cell_size_m)
+    walls = walls_array(walls)
+    x0, x1, y0, y1 = _bounds(grid, walls, image)
     n = cells["n_scans"].to_numpy(dtype=float)
     interp = cells["interpolated"].to_numpy(dtype=bool) if "interpolated" in cells else np.zeros(len(cells), bool)
     img = grid.image(cells, np.where(interp, np.nan, n))
     vmax = max(float(np.nanmax(img)) if np.isfinite(img).any() else 1.0, 1.0)
     norm = LogNorm(1, vmax) if vmax >= LOG_COUNT_FROM else Normalize(0, vmax)
-    aspect = (grid.extent[3] - grid.extent[2]) / max(grid.extent[1] - grid.extent[0], 1e-9)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     fig = _figure(7.5, 1.2 + 6.0 * min(max(aspect, 0.4), 1.6))
     ax = fig.subplots()
     if interp.any():
         ax.imshow(grid.image(cells, np.where(interp, 1.0, np.nan)), origin="lower", extent=grid.extent,
                   cmap="Greys", vmin=0, vmax=4, interpolation="nearest", zorder=0)
-    im = _draw_grid(ax, grid, img, norm, walls_array(walls), image=image)
+    im = _draw_grid(ax, grid, img, norm, walls, image=image)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     fig.colorbar(im, ax=ax, label="scans per cell", shrink=0.85)
     _xy_axes(ax)
     ax.set_title(_wrapped(f"coverage: {int((~interp).sum())} visited cells"
@@ -244,7 +283,7 @@ def cdf_figure(errors: Mapping[str, np.ndarray], title: str = "localization erro
         if e.size == 0:
             continue
         map_name, _, loc = label.rpartition(" / ")
-        c = colours.setdefault(loc, f"C{len(colours) % 10}")
+        c = colours.setdefault(loc, LINE_COLORS[len(colours) % len(LINE_COLORS)])
         ax.ecdf(e, color=c, ls=MAP_LINE_STYLES.get(map_name, "-"), lw=1.4,
                 label=f"{label}: median {np.median(e):.1f} m, n = {e.size}")
     for x in CDF_MARKS_M:
@@ -261,17 +300,40 @@ def cdf_figure(errors: Mapping[str, np.ndarray], title: str = "localization erro
 
 
 # ------------------------------------------------------------------ walks and the optimiser
-def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequence[str],
+@dataclass(frozen=True)
+class WalkStyle:
+    """How the walks are coloured: ``rgb`` walk_id -> colour (0-1) of each walk drawn in colour (a walk
+    without one is drawn thin and light grey: not placed); ``legend`` (label, colour) entries; ``colorbar``
+    (colour map name, vmin, vmax, label) when the colours stand for a value rather than a walk."""
+
+    rgb: Mapping[str, tuple[float, float, float]]
+    legend: Sequence[tuple[str, Any]] = ()
+    colorbar: tuple[str, float, float, str] | None = None
+
+
+#: the light grey of walks not placed in the map
+UNPLACED_GREY = "0.72"
+
+
+def walk_style(walk_order: Sequence[str]) -> WalkStyle:
+    """One palette colour per walk (:data:`rmbuild.viz.colors.WALK_PALETTE`, cycled), named in the legend
+    when there are at most 12."""
+    rgb = {str(w): _rgb(i) for i, w in enumerate(walk_order)}
+    legend = [(w, c) for w, c in rgb.items()] if len(rgb) <= 12 else []
+    return WalkStyle(rgb, legend)
+
+
+def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], style: WalkStyle | Sequence[str],
                  truth: pd.DataFrame | None = None, walls: np.ndarray | None = None,
                  fixes: Sequence[pd.DataFrame | None] | None = None,
                  image: tuple[np.ndarray, Sequence[float]] | None = None) -> Any:
     """One panel per (title, poses) — poses with walk_id, x_m, y_m — over the floor plan (walls (n, 4) m;
     ``image``: its raster (pixels, extent x0, y0, x1, y1 m), faded) and the true paths (thin dashed grey)
-    when known; one colour per walk. ``fixes``: per panel, the waypoints / position fixes (walk_id, x_m,
-    y_m) in that panel's frame, or None when they cannot be placed there; drawn as crosses in the walk's
-    colour."""
-    order = {str(w): i for i, w in enumerate(walk_order)}
-    fig = _figure(6.2 * len(panels), 5.6 + (0.5 if len(walk_order) <= 12 else 0))
+    when known, coloured by ``style`` (a :class:`WalkStyle`, or the walk order: one colour per walk).
+    ``fixes``: per panel, the waypoints / position fixes (walk_id, x_m, y_m) in that panel's frame, or None
+    when they cannot be placed there; drawn as crosses in their walk's colour."""
+    style = style if isinstance(style, WalkStyle) else walk_style(style)
+    fig = _figure(6.2 * len(panels), 5.6 + (0.5 if style.legend else 0))
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     any_fix = False
     for k, (ax, (title, poses)) in enumerate(zip(axes, panels)):
@@ -281,29 +343,42 @@ def walks_figure(panels: Sequence[tuple[str, pd.DataFrame]], walk_order: Sequenc
             for _, g in truth.groupby("walk_id", sort=False):
                 ax.plot(g["x_m"], g["y_m"], color="0.6", lw=0.7, ls="--", zorder=2)
         for wid, g in poses.groupby("walk_id", sort=False):
-            ax.plot(g["x_m"], g["y_m"], color=_rgb(order.get(str(wid), 0)), lw=1.1, zorder=3)
+            c = style.rgb.get(str(wid))
+            ax.plot(g["x_m"], g["y_m"], color=UNPLACED_GREY if c is None else c, lw=0.7 if c is None else 1.1,
+                    zorder=2.5 if c is None else 3)
         fx = fixes[k] if fixes is not None and k < len(fixes) else None
         if fx is not None and len(fx):
             any_fix = True
-            cols = [_rgb(order.get(str(w), 0)) for w in fx["walk_id"]]
+            cols = [style.rgb.get(str(w), UNPLACED_GREY) for w in fx["walk_id"]]
             ax.scatter(fx["x_m"], fx["y_m"], s=22, marker="x", c=cols, lw=1.0, zorder=4)
         ax.set_title(_wrapped(title, 5.4), fontsize=10)
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel(_XY_LABELS[0])
         ax.set_ylabel(_XY_LABELS[1])
         ax.grid(alpha=0.2)
+    _walks_legend(fig, axes, style, truth is not None, any_fix)
+    return fig
+
+
+def _walks_legend(fig: Any, axes: Any, style: WalkStyle, truth: bool, fixes: bool) -> None:
     from matplotlib.lines import Line2D
 
-    handles = ([Line2D([], [], color=_rgb(i), label=str(w)) for i, w in enumerate(walk_order)]
-               if len(walk_order) <= 12 else [])
-    if truth is not None:
+    handles = [Line2D([], [], color=c, label=label) for label, c in style.legend]
+    if truth:
         handles.append(Line2D([], [], color="0.6", ls="--", label="truth"))
-    if any_fix:
+    if fixes:
         handles.append(Line2D([], [], color="0.2", marker="x", ls="", label="waypoints / fixes"))
     if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 7), fontsize=8,
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=8,
                    frameon=False)
-    return fig
+    if style.colorbar is not None:
+        import matplotlib
+        from matplotlib.cm import ScalarMappable
+        from matplotlib.colors import Normalize
+
+        name, lo, hi, label = style.colorbar
+        sm = ScalarMappable(Normalize(lo, hi if hi > lo else lo + 1.0), matplotlib.colormaps[name])
+        fig.colorbar(sm, ax=list(axes), shrink=0.8, label=label)
 
 
 def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None) -> Any:
@@ -315,7 +390,7 @@ def cost_figure(cost: np.ndarray, solve: np.ndarray | None = None) -> Any:
     sv = np.zeros(c.size, dtype=np.int64) if solve is None else np.asarray(solve, dtype=np.int64)
     for k in np.unique(sv):
         idx = np.flatnonzero(sv == k)
-        ax.plot(idx, c[idx], marker="o", ms=3, color="C0")
+        ax.plot(idx, c[idx], marker="o", ms=3, color=LINE_COLORS[0])
         if k > sv.min():
             ax.axvline(idx[0] - 0.5, color="0.5", ls=":", lw=1)
     n_solves = int(sv.max() - sv.min() + 1) if sv.size else 1
@@ -341,7 +416,7 @@ def rf_model_figure(model: Mapping[str, float], exponent_auc: Mapping[str, float
     mu = (float(model["near_mu"]), float(model["far_mu"]))
     sd = (float(model["near_sigma"]), float(model["far_sigma"]))
     r = np.linspace(max(0.0, mu[0] - 4 * sd[0]), mu[1] + 4 * sd[1], 300)
-    for (m, s), label, color in zip(zip(mu, sd), ("near (< 5 m)", "far (15-30 m)"), ("C2", "C3")):
+    for (m, s), label, color in zip(zip(mu, sd), ("near (< 5 m)", "far (15-30 m)"), LINE_COLORS[:2]):
         ax.plot(r, np.exp(-0.5 * ((r - m) / s) ** 2) / (s * np.sqrt(2 * np.pi)), color=color, label=label)
     if "threshold_db" in model:
         ax.axvline(float(model["threshold_db"]), color="0.3", ls="--", lw=1, label="equally likely")
@@ -354,7 +429,7 @@ def rf_model_figure(model: Mapping[str, float], exponent_auc: Mapping[str, float
     if exponent_auc:
         ax2 = axes[1]
         betas = [float(b) for b in exponent_auc]
-        ax2.plot(betas, list(exponent_auc.values()), marker="o", color="C0")
+        ax2.plot(betas, list(exponent_auc.values()), marker="o", color=LINE_COLORS[0])
         if exponent is not None:
             ax2.axvline(float(exponent), color="0.3", ls="--", lw=1, label=f"used: β = {exponent:g}")
             ax2.legend(fontsize=8)

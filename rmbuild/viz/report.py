@@ -26,14 +26,8 @@ from rmbuild.io.floor_image import load_image
 from rmbuild.io.workspace import ARTEFACTS, STAGE_COMMANDS, STAGE_DIRS, Workspace
 from rmbuild.types import BUILDING_FRAME_GAUGES
 from rmbuild.viz import figures
-from rmbuild.viz.align import (
-    apply,
-    frame_to_fixes,
-    frame_to_truth,
-    per_walk_to_fixes,
-    per_walk_to_truth,
-    plan_segments,
-)
+from rmbuild.viz.align import plan_segments
+from rmbuild.viz.report_walks import walk_caption, walk_panels, walk_style
 from rmbuild.viz.walk_table import real_errors, walk_rows
 
 log = logging.getLogger(__name__)
@@ -81,10 +75,12 @@ body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em a
 h1{font-size:1.6em;margin-bottom:.2em} h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
 .meta{color:#666;font-size:.9em} figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee}
 figcaption{color:#555;font-size:.9em} table{border-collapse:collapse;font-size:.9em;margin:.5em 0}
-td,th{border:1px solid #ddd;padding:.25em .6em;text-align:left}
+td,th{border:1px solid #ddd;padding:.25em .6em;text-align:left;white-space:pre-line;vertical-align:top}
 td.num{text-align:right;font-variant-numeric:tabular-nums}
 th{background:#f5f5f5} pre{background:#f7f7f7;padding:.7em;overflow-x:auto;font-size:.85em}
 .missing{color:#999;font-style:italic} details{margin:.4em 0}
+.warnings{background:#fff8e6;border-left:4px solid #e69f00;padding:.2em 1em;font-size:.9em}
+.warnings h3{font-size:1em;margin:.6em 0 .2em} .warnings li{margin:.2em 0}
 """
 
 
@@ -130,7 +126,9 @@ def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
         for k, v in d.items():
             out.update(_flatten(v, f"{prefix}{k}."))
     elif isinstance(d, list):
-        if d and len(d) <= 8 and all(not isinstance(v, (dict, list)) for v in d):
+        if d and all(isinstance(v, str) for v in d):  # warnings, notes: their text, one per line
+            out[prefix[:-1]] = "\n".join(d)
+        elif d and len(d) <= 8 and all(not isinstance(v, (dict, list)) for v in d):
             out[prefix[:-1]] = ", ".join(map(str, d))
         elif d:
             out[prefix[:-1]] = f"[{len(d)} values]"
@@ -149,11 +147,19 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+class Markup(str):
+    """A table cell that is HTML already (a link), not text to escape."""
+
+
+def _cell(c: str) -> str:
+    return c if isinstance(c, Markup) else html.escape(c)
+
+
 def _table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...]) -> str:
     h = "".join(f"<th>{html.escape(c)}</th>" for c in header)
     body = "".join(
         "<tr>" + "".join(
-            f"<td class=\"num\">{html.escape(c)}</td>" if i and _is_num(c) else f"<td>{html.escape(c)}</td>"
+            f"<td class=\"num\">{_cell(c)}</td>" if i and _is_num(c) else f"<td>{_cell(c)}</td>"
             for i, c in enumerate(r)) + "</tr>"
         for r in rows)
     return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
@@ -231,76 +237,28 @@ def _fixes_of(ds: Any) -> pd.DataFrame | None:
     return fx
 
 
-def _before_panel(ds: Any, fixes: pd.DataFrame | None) -> tuple[tuple[str, pd.DataFrame], bool]:
-    """The raw walks (title, poses) and whether they are drawn in the building frame."""
-    raw = per_walk_to_truth(ds.poses, ds.truth_poses)
-    if raw is not None:
-        return ("before: raw PDR, each walk fitted to the truth on its own (SE(2))", raw), True
-    raw = per_walk_to_fixes(ds.poses, fixes)
-    if raw is not None:
-        n_left = ds.poses["walk_id"].nunique() - raw["walk_id"].nunique()
-        return ("before: raw PDR, each walk fitted to its own waypoints (SE(2))"
-                + (f"; {n_left} walk(s) with < 2 waypoints not drawn" if n_left else ""), raw), True
-    return ("before: raw PDR, each walk in its own frame", ds.poses), False
-
-
-def _after_panel(opt: pd.DataFrame, ds: Any, gauge: str | None, fixes: pd.DataFrame | None
-                 ) -> tuple[tuple[str, pd.DataFrame], Any, bool, int]:
-    """The optimised walks placed in the map (title, poses), the map-to-building transform (None when
-    unknown or not needed), whether the panel is in the building frame, how many unlinked walks are left out."""
-    shown = opt.copy()
-    unplaced = 0
-    if "linked" in shown:  # an unlinked walk's frame is arbitrary: not drawn with the placed ones
-        unplaced = int(shown.loc[~shown["linked"].astype(bool), "walk_id"].nunique())
-        shown = shown[shown["linked"].astype(bool)]
-    if gauge in BUILDING_FRAME_GAUGES:
-        by = "known anchor positions" if gauge == "anchors" else "the floor plan"
-        return (f"after: optimised, in the building frame (fixed by {by})", shown), None, True, unplaced
-    rt = frame_to_truth(opt, ds.truth_poses, gauge)
-    how = "all walks' true paths"
-    if rt is None and ds.truth_poses is None:
-        rt = frame_to_fixes(shown, fixes, gauge)
-        how = "the waypoints"
-    if rt is None:
-        return (f"after: optimised, in the frame of one walk (gauge {gauge})", shown), None, False, unplaced
-    xy = apply(rt, shown[["x_m", "y_m"]].to_numpy(dtype=float))
-    shown["x_m"], shown["y_m"] = xy[:, 0], xy[:, 1]
-    return (f"after: optimised; one SE(2) for all walks, fitted to {how}", shown), rt, True, unplaced
-
-
 def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, plan: tuple[np.ndarray | None, Any],
                   missing: dict[str, str]) -> tuple[list[ReportFigure], Any]:
-    """The walks before/after the optimisation and the optimiser's cost; also the optimiser-to-building
-    transform (None when unknown). ``plan``: its walls (n, 4) m and raster image, each None when absent."""
+    """The walks before/after the optimisation (:mod:`rmbuild.viz.report_walks`), the optimiser's cost and
+    its RF model; also the optimiser-to-building transform (None when unknown or not needed). ``plan``: its
+    walls (n, 4) m and raster image, each None when absent."""
     walls, plan_image = plan
     fixes = _fixes_of(ds)
-    before, building = _before_panel(ds, fixes)
-    panels, panel_fixes = [before], [fixes if building else None]
-    rt, unplaced, all_building = None, 0, building
-    if ws.has("optimize"):
-        after, rt, building, unplaced = _after_panel(ws.read_table("optimize.poses"), ds, gauge, fixes)
-        panels.append(after)
-        panel_fixes.append(None if fixes is None or not building
-                           else fixes[fixes["walk_id"].isin(after[1]["walk_id"].unique())])
-        all_building &= building
-    else:
+    optimized = ws.has("optimize")
+    if not optimized:
         missing["optimize"] = "optimize has not run: only the raw walks are shown"
-    drawn_walls = walls if all_building else None
-    image = plan_image if all_building else None
-    fig = figures.walks_figure(panels, ds.walk_ids(), truth=ds.truth_poses, walls=drawn_walls,
-                               fixes=panel_fixes, image=image)
-    caption = "Coloured: one colour per walk"  # and only what is drawn
-    caption += "; dashed grey: ground truth" if ds.truth_poses is not None else " (no true paths to draw)"
-    n_fix = max((len(f) for f in panel_fixes if f is not None), default=0)
-    if n_fix:
-        caption += f"; crosses: waypoints / position fixes ({n_fix}), in their walk's colour"
-    caption += "; dark lines: floor plan" if drawn_walls is not None else ""
-    caption += "; underneath: the plan's image." if image is not None else "."
-    if unplaced:
-        caption += (f" After: {unplaced} walk(s) not linked to the map are not drawn (their frame is arbitrary;"
-                    " optimize/walks.parquet names them).")
+    opt = ws.read_table("optimize.poses") if optimized else None
+    walks = ws.read_table("optimize.walks") if optimized and ws.exists("optimize.walks") else None
+    wp = walk_panels(ds, opt, walks, gauge, fixes)
+    style = walk_style([str(w) for w in ds.walk_ids()], walks)
+    drawn_walls = walls if wp.building else None
+    image = plan_image if wp.building else None
+    fig = figures.walks_figure(wp.panels, style, truth=ds.truth_poses, walls=drawn_walls, fixes=wp.fixes,
+                               image=image)
+    caption = walk_caption(wp, style, ws.read_report("optimize") if optimized else None,
+                           ds.truth_poses is not None, drawn_walls is not None, image is not None)
     figs = [ReportFigure("walks", "Walks before and after optimisation", _png(fig), caption)]
-    if ws.has("optimize") and ws.exists("optimize.history"):
+    if optimized and ws.exists("optimize.history"):
         h = ws.read_table("optimize.history")
         if "cost" in h and len(h):
             solve = h["solve"].to_numpy() if "solve" in h else None
@@ -308,17 +266,28 @@ def _walk_figures(ws: Workspace, ds: Any, gauge: str | None, plan: tuple[np.ndar
                 "cost", "Optimiser cost", _png(figures.cost_figure(h["cost"].to_numpy(), solve)),
                 "Cost after each Levenberg-Marquardt iteration of every solve; a dotted line starts the next solve, "
                 "whose graph has other factors (re-selected pairs, rescaled odometry), so its cost jumps."))
-    rf = ((ws.read_report("optimize") or {}).get("vicinity") or {}) if ws.has("optimize") else {}
+    rf = ((ws.read_report("optimize") or {}).get("vicinity") or {}) if optimized else {}
     if rf.get("rf_model"):
         figs.append(ReportFigure(
             "rf", "RF model", _png(figures.rf_model_figure(rf["rf_model"], rf.get("rss_exponent_auc"),
-                                                            rf.get("rss_exponent"))),
-            "How the RSS distance of two walks' scans relates to how far apart they were, calibrated on the data "
+                                                            rf.get("rss_exponent"))), _rf_caption(rf)))
+    return figs, wp.rt
+
+
+def _rf_caption(rf: dict) -> str:
+    text = ("How the RSS distance of two walks' scans relates to how far apart they were, calibrated on the data "
             "itself (pairs of scans of one walk, whose separation its dead reckoning knows); right: the powed "
-            "exponent's choice (a β other than 1 only when it gains ≥ 0.03 AUC)."
-            + (f" Phones' RSS offsets removed (dB): {rf['device_offsets_db']}." if rf.get("device_offsets_db")
-               else "")))
-    return figs, rt
+            "exponent's choice (a β other than 1 only when it gains ≥ 0.03 AUC).")
+    offsets = rf.get("device_offsets_db") or {}
+    moved = {dev: float(v) for dev, v in offsets.items() if abs(float(v)) >= 0.05}
+    if moved:
+        shown = ", ".join(f"{dev} {v:+.1f} dB" for dev, v in moved.items())
+        rest = len(offsets) - len(moved)
+        text += (f" Phones' RSS offsets against the reference phone, removed before fingerprints are compared: "
+                 f"{shown}" + (f" (the other {rest} read alike)." if rest else "."))
+    elif len(offsets) > 1:
+        text += f" The {len(offsets)} phones read alike: no RSS offset removed."
+    return text
 
 
 def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, plan: tuple[np.ndarray | None, Any],
@@ -344,17 +313,27 @@ def _map_figures(ws: Workspace, heatmap_top_n: int, gauge: str | None, rt: Any, 
     walls_map = None if walls is None else to_map(walls.reshape(-1, 2))
     fixes_map = None if fixes is None else to_map(fixes[["x_m", "y_m"]].to_numpy(dtype=float))
     image = plan_image if in_building else None  # the raster is not turned into a walk's frame
-    fig = figures.heatmaps_figure(cells, heatmap_top_n, None if walls_map is None else walls_map.reshape(-1, 4),
-                                  cell_size, fixes_map, image)
+    walls4 = None if walls_map is None else walls_map.reshape(-1, 4)
+    fig = figures.heatmaps_figure(cells, heatmap_top_n, walls4, cell_size, fixes_map, image)
     if fig is None:
         missing["map"] = "the radio map table has no usable rows"
         return []
     caption = ("Mean RSSI per cell (dBm) in the map frame, one colour scale from the weakest to the strongest "
-               "value drawn; empty cells were never visited")
+               "value drawn; empty cells were never visited; one access point per radio (the other networks a "
+               "radio announces, BSSIDs differing in the first octet or the last digit, map the same signal)")
     caption += "; dark lines: floor plan" if walls_map is not None else ""
     caption += "; underneath: the plan's image" if image is not None else ""
     caption += "; grey dots: waypoints / position fixes" if fixes_map is not None else ""
-    return [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest APs", _png(fig), caption + ".")]
+    out = [ReportFigure("heatmaps", f"Radio map: the {heatmap_top_n} strongest radios", _png(fig), caption + ".")]
+    if ws.exists("map.cell_table"):
+        cov = figures.coverage_figure(ws.read_table("map.cell_table"), cell_size, walls4, frame, image)
+        share = _get(ws.read_report("map"), "plan_coverage.share")
+        out.append(ReportFigure(
+            "coverage", "Coverage", _png(cov),
+            "Scans per visited cell over the whole floor plan: the blank part of the plan is where no walk of the "
+            "map went" + (f"; the map's cells cover {share:.0%} of the plan's walkable space" if share else "")
+            + "."))
+    return out
 
 
 def _evaluation(ws: Workspace, ev: dict | None, missing: dict[str, str]
@@ -412,14 +391,30 @@ def _tables_html(ws: Workspace, reports: dict[str, dict | None]) -> tuple[str, s
     return keys, "<h2>Configuration used</h2>" + ("".join(configs) or "<p class=\"missing\">none found</p>")
 
 
+def _warnings_html(reports: dict[str, dict | None], missing: dict[str, str]) -> str:
+    """Every stage's warnings, in full, and what the report could not show; "" when there are none."""
+    parts = []
+    for stage, rep in reports.items():
+        warnings = [w for w in (rep or {}).get("warnings") or [] if isinstance(w, str)]
+        if warnings:
+            items = "".join(f"<li>{html.escape(w)}</li>" for w in warnings)
+            parts.append(f"<h3>{html.escape(STAGE_COMMANDS.get(stage, stage))} ({len(warnings)})</h3><ul>{items}</ul>")
+    if missing:
+        items = "".join(f"<li>{html.escape(k)}: {html.escape(v)}</li>" for k, v in missing.items())
+        parts.append(f"<h3>not shown</h3><ul>{items}</ul>")
+    return ("<h2 id=\"warnings\">Warnings</h2><div class=\"warnings\">" + "".join(parts) + "</div>") if parts else ""
+
+
 def _page(ws: Workspace, figs: list[ReportFigure], missing: dict[str, str], eval_rows: list[tuple[str, ...]],
           reports: dict[str, dict | None], walks_html: str = "") -> str:
     by_name = {f.name: f for f in figs}
-    sections = ["<h2>Walks</h2>" + _fig_html(by_name["walks"]) + walks_html
+    sections = [_warnings_html(reports, missing)]
+    sections.append("<h2>Walks</h2>" + _fig_html(by_name["walks"]) + walks_html
                 + (_fig_html(by_name["cost"]) if "cost" in by_name else "")
-                + (_fig_html(by_name["rf"]) if "rf" in by_name else "")]
+                + (_fig_html(by_name["rf"]) if "rf" in by_name else ""))
     sections.append("<h2>Radio map</h2>" + (_fig_html(by_name["heatmaps"]) if "heatmaps" in by_name
-                                            else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>"))
+                                            else f"<p class=\"missing\">{html.escape(missing.get('map', ''))}</p>")
+                    + (_fig_html(by_name["coverage"]) if "coverage" in by_name else ""))
     ev_html = "<h2>Localization</h2>"
     if "cdf" in by_name:
         ev_html += _fig_html(by_name["cdf"])
@@ -442,3 +437,69 @@ def _page(ws: Workspace, figs: list[ReportFigure], missing: dict[str, str], eval
         + f"<script type=\"application/json\" id=\"rmbuild-missing\">{html.escape(json.dumps(missing))}</script>"
         "</body></html>\n"
     )
+
+
+# ------------------------------------------------------------------ a building's page
+def _stat(s: dict | None, key: str) -> str:
+    v = (s or {}).get(key)
+    return "—" if v is None else (f"{v:.2f}" if isinstance(v, float) else str(v))
+
+
+def _floor_row(name: str, link: str | None, reps: dict[str, dict | None]) -> tuple[str, ...]:
+    """One floor of the building table: walks, linked, landmark error, map cells, kNN medians, report."""
+    ing, opt, mp, ev = (reps.get(s) or {} for s in ("ingest", "optimize", "map", "evaluate"))
+    lm = _get(opt, "optimized.landmark_error_fitted_walks_m.mean") or _get(opt, "optimized.landmark_error_m.mean")
+    knn = {m: _get(ev, f"maps.{m}.knn.median") for m in ("built", "surveyed", "raw")}
+    return (name, _fmt(ing.get("walks")), _fmt(opt.get("linked_walks")), "—" if lm is None else f"{lm:.1f}",
+            _fmt(mp.get("cells")), *("—" if v is None else f"{v:.1f}" for v in knn.values()),
+            _fmt(ev.get("n_scored")),
+            Markup(f'<a href="{html.escape(link)}">floor {html.escape(name)}</a>') if link else "")
+
+
+def _floor_eval_html(name: str, ev: dict) -> str:
+    """A floor's evaluation table, the rows and columns `rmbuild evaluate` prints."""
+    cols = ("mean", "median", "p90", "rmse", "max", "p_lt_5m", "p_lt_10m", "n")
+    rows = [(m, loc, *(_stat(s, c) for c in cols)) for m, locs in (ev.get("maps") or {}).items()
+            for loc, s in (locs or {}).items()]
+    head = ("map", "localizer", "mean", "median", "p90", "rmse", "max", "<5m", "<10m", "n")
+    return f"<h3>floor {html.escape(name)}</h3>" + _table(rows, head)
+
+
+def _building_eval_html(b: dict) -> str:
+    """The building's floor classification and combined errors, as `rmbuild evaluate` prints them."""
+    fc = b.get("floor_classification")
+    if not fc:
+        return "<p class=\"missing\">no floor classification (no floor evaluated)</p>"
+    per = ", ".join(f"{f} {v['hit_rate']:.1%}" for f, v in fc["per_floor"].items())
+    rows = []
+    for m, d in (b.get("maps") or {}).items():
+        for loc, s in d.items():
+            a, c, k = s["xy_all_scans"], s["xy_correct_floor"], s["combined"]
+            rows.append((m, loc, _stat(a, "mean"), _stat(a, "p75"), _stat(c, "mean"), _stat(k, "mean"),
+                         _stat(k, "p75")))
+    head = ("map", "localizer", "xy mean", "xy p75", "correct-floor mean", "combined mean", "combined p75")
+    return (f"<p>Floor hit rate on the test scans: {fc['hit_rate']:.1%} of {fc['n']} (single scans "
+            f"{fc['hit_rate_single_scan']:.1%}); per floor: {html.escape(per)}. Errors in m; combined: + "
+            f"{b.get('floor_penalty_m', 15):g} m per floor off.</p>" + _table(rows, head))
+
+
+def building_html(title: str, floors: dict[str, tuple[str | None, dict[str, dict | None]]],
+                  evaluate_building: dict | None) -> str:
+    """A building's page: per floor its walks, linked walks, landmark error, map and kNN medians with a link
+    to its own report (``floors``: name -> (relative link or None, that floor's report per stage)), each
+    floor's evaluation table, the floors skipped and the building's floor classification."""
+    head = ("floor", "walks", "linked", "landmark error, linked (m)", "map cells", "kNN median built (m)",
+            "surveyed (m)", "raw (m)", "test scans", "report")
+    table = _table([_floor_row(n, link, reps) for n, (link, reps) in floors.items()], head)
+    b = evaluate_building or {}
+    skipped = b.get("skipped_floors") or {}
+    evals = "".join(_floor_eval_html(n, reps.get("evaluate") or {}) for n, (_, reps) in floors.items()
+                    if reps.get("evaluate") and n not in skipped)
+    skip = "".join(f"<li>floor {html.escape(n)}: {html.escape(why)}</li>" for n, why in skipped.items())
+    body = (f"<h1>{html.escape(title)}</h1><h2>Floors</h2>{table}"
+            + (f"<h2>Floors not evaluated</h2><ul>{skip}</ul>" if skip else "")
+            + ("<h2>Localization per floor</h2>" + evals if evals else "")
+            + ("<h2>Building: which floor</h2>" + _building_eval_html(b) if evaluate_building else ""))
+    return ("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title><meta name=\"viewport\" content=\"width=device-width, "
+            f"initial-scale=1\"><style>{_CSS}</style></head><body>{body}</body></html>\n")

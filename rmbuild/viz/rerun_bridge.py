@@ -414,7 +414,7 @@ class RerunViewer:
     def log_vicinity(self, pairs: pd.DataFrame, node_xy: np.ndarray, max_lines: int = MAX_VICINITY_LINES,
                      error_scale: float | None = None, seed: int = 0) -> int:
         """Vicinity factors as segments between their nodes' positions ``node_xy`` (n_nodes, 2), coloured
-        by ``final_error`` (green low -> red at ``error_scale``, default the 95th percentile), labelled with
+        by ``final_error`` (blue low -> red at ``error_scale``, default the 95th percentile), labelled with
         their kind (and "anisotropic" for along/across factors) and error.
 
         When there are more than ``max_lines`` pairs, the worst 20 % of the sample are the pairs with the
@@ -678,16 +678,6 @@ class RerunViewer:
         if xi is not None:
             self.rec.log(f"{PLOTS}/eval/xi/{entity_part(localizer)}", self.rr.Scalars(float(xi)))
         self._has["eval"] = True
-
-    def log_scalar(self, path: str, timeline: str, index: int, value: float) -> None:
-        """Any scalar series under ``plots/<path>`` (for stage hooks without a dedicated method)."""
-        self.rec.set_time(timeline, sequence=int(index))
-        self.rec.log(f"{PLOTS}/{path}", self.rr.Scalars(float(value)))
-
-    def log_text(self, path: str, text: str) -> None:
-        """A markdown note (e.g. a stage's summary) at ``notes/<path>``."""
-        self.rec.log(f"notes/{path}", self.rr.TextDocument(text, media_type=self.rr.MediaType.MARKDOWN),
-                     static=True)
 
 
 def _move_into_place(src: Path, dst: Path) -> None:

@@ -96,10 +96,6 @@ class Viewer(Protocol):
     def log_particles(self, localizer: str, scan: int, xy: np.ndarray, weights: np.ndarray | None = None,
                       xi: float | None = None) -> None: ...
 
-    def log_scalar(self, path: str, timeline: str, index: int, value: float) -> None: ...
-
-    def log_text(self, path: str, text: str) -> None: ...
-
 
 class NullViewer:
     """Stands in when viewing is off: every method of :class:`Viewer`, doing nothing."""
@@ -170,12 +166,6 @@ class NullViewer:
 
     def log_particles(self, localizer: str, scan: int, xy: np.ndarray, weights: np.ndarray | None = None,
                       xi: float | None = None) -> None:
-        pass
-
-    def log_scalar(self, path: str, timeline: str, index: int, value: float) -> None:
-        pass
-
-    def log_text(self, path: str, text: str) -> None:
         pass
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
-from typing import Any
 
 from rmbuild.errors import InputError
 from rmbuild.io.formats.base import REGISTRY, RawInput, Reader, register
@@ -45,19 +44,16 @@ def expand_inputs(paths: list[str | Path]) -> list[Path]:
     return out
 
 
-def choose_reader(files: list[Path], fmt: str | None, options: Any = None) -> Reader:
-    """The reader named ``fmt``, or the first registered reader whose ``sniff`` accepts ``files``.
-
-    ``options`` (the ``[pdr]`` config) is handed to the reader's constructor.
-    """
+def choose_reader(files: list[Path], fmt: str | None) -> Reader:
+    """The reader named ``fmt``, or the first registered reader whose ``sniff`` accepts ``files``."""
     _load()
     if fmt is not None:
         if fmt not in REGISTRY:
             raise InputError(f"unknown format {fmt!r} (known: {', '.join(REGISTRY)})")
-        return REGISTRY[fmt](options)
+        return REGISTRY[fmt]()
     for cls in REGISTRY.values():
         if cls.sniff(files):
-            return cls(options)
+            return cls()
     raise InputError(
         f"could not recognise the input format of {files[0]} (and {len(files) - 1} other files); "
         f"pass --format (known: {', '.join(REGISTRY)})"

@@ -3,14 +3,14 @@
 A reader turns user files into a :class:`RawInput` — tables in the *input schema* documented in
 ``docs/data-format.md`` — and nothing more. Validation of values that every format shares, integration of
 step increments and attachment of Wi-Fi readings to pose nodes happen afterwards in
-:mod:`rmbuild.ingest_core`, so all formats get the same checks.
+:mod:`rmbuild.ingest.core`, so all formats get the same checks.
 
 Contract for ``Reader.read``:
 - ``poses``: walk_id (str), t_s (float s), x_m, y_m, heading_rad — per-step poses in the walk's own frame;
   optional yaw_abs_rad, yaw_abs_sigma_rad, step_freq_hz. (Step increments, e.g. a foot IMU's, are
   integrated by the reader.)
 - ``imu``: walk_id -> :class:`RawImu`, the raw phone IMU of the walks that come without poses (a walk has
-  poses or IMU, never both). Readers only read: :mod:`rmbuild.ingest_core` runs the PDR on them, once, for
+  poses or IMU, never both). Readers only read: :mod:`rmbuild.ingest.core` runs the PDR on them, once, for
   every format.
 - ``wifi``: walk_id, t_s, bssid (str), rssi_dbm (float); optional freq_mhz, ssid.
 - ``ble``: BLE beacon readings in the ``wifi`` columns (bssid = the beacon's id, its MAC; ssid = its
@@ -18,9 +18,9 @@ Contract for ``Reader.read``:
 - ``fixes``: walk_id, t_s, x_m, y_m, label — ground truth / landmark fixes (may be empty).
 - ``walks``: walk_id, device_id, user_id, role, source.
 - ``floor`` (optional str column on ``walks`` or ``poses``): the floor the data is on; an input with
-  several floors is split into one workspace per floor (:mod:`rmbuild.ingest_floors`).
+  several floors is split into one workspace per floor (:mod:`rmbuild.ingest.floors`).
 - ``pressure``: walk_id -> the barometer's (times s, hPa), when the format has one: without floor columns,
-  its floor changes split the walk (:mod:`rmbuild.ingest_barometer`).
+  its floor changes split the walk (:mod:`rmbuild.ingest.barometer`).
 - A problem in a file raises :class:`rmbuild.errors.InputError` naming file and line/row. Lines of a
   known-but-unused kind are counted in ``skipped`` (kind -> count), not errors.
 - ``where`` maps each table to a callable giving "file:row" for a row position, so shared validation can
@@ -39,7 +39,6 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import PdrConfig
 from rmbuild.pdr import ImuSignals
 
 
@@ -88,12 +87,14 @@ class RawInput:
     merge_duplicate_readings: bool = False
     #: the floor plan that came with the data (GeoJSON in local metres, :func:`rmbuild.floorplan.to_geojson`)
     floorplan: dict | None = None
-    #: floor name -> its plan, for an input of several floors (``floor`` columns, rmbuild/ingest_floors.py)
+    #: floor name -> its plan, for an input of several floors (``floor`` columns, rmbuild/ingest/floors.py)
     floorplans: dict[str, dict] = field(default_factory=dict)
     #: walk_id -> (times s, pressure hPa) of its barometer, when the format has one (floor changes)
     pressure: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
-    #: where a walk was cut between floors (:mod:`rmbuild.ingest_floors`): walk, t_s, the segments either side
+    #: where a walk was cut between floors (:mod:`rmbuild.ingest.floors`): walk, t_s, the segments either side
     transitions: list[dict] = field(default_factory=list)
+    #: the name of the one floor a single-floor input's floor columns give (set when they are consumed)
+    floor_name: str | None = None
     #: BLE beacon readings (the ``wifi`` columns; ``where`` key "ble"); None: the input has none
     ble: pd.DataFrame | None = None
     #: (lat, lon) degrees: the WGS84 origin the reader chose itself for the fixes' local frame; ingest writes
@@ -107,9 +108,7 @@ class Reader(ABC):
     name: ClassVar[str]
     description: ClassVar[str]
 
-    def __init__(self, options: PdrConfig | None = None) -> None:
-        """``options``: the ``[pdr]`` config (phone PDR and format specifics); defaults when None."""
-        self.options = options if options is not None else PdrConfig()
+    def __init__(self) -> None:
         #: called with each input file once it is read (progress); set by the caller, None: nobody counts
         self.on_file: Callable[[Path], None] | None = None
 
@@ -128,7 +127,8 @@ class Reader(ABC):
 
     @abstractmethod
     def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
-        """Read ``files`` into a :class:`RawInput`; raise InputError (file + line) on malformed input."""
+        """Read ``files`` into a :class:`RawInput`; raise InputError (file + line) on malformed input.
+        ``cfg``: the ``[ingest]`` config, whose ``[ingest.<format>]`` table holds this reader's options."""
 
 
 #: format name -> reader class; filled by :mod:`rmbuild.io.formats`

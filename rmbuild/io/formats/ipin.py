@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import PdrConfig
+from rmbuild.config.ingest import IngestConfig, IpinConfig
 from rmbuild.errors import InputError
 from rmbuild.io.compressed import read_bytes
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
@@ -306,17 +305,17 @@ def raw_imu(log: _Log) -> RawImu:
                                            "yaw": log.line["AHRS"]})
 
 
-def _enu_origin(logs: list[_Log], opts, notes: list[str]) -> tuple[float, float]:
+def _enu_origin(logs: list[_Log], opts: IpinConfig, notes: list[str]) -> tuple[float, float]:
     """The WGS84 origin (lat, lon) of the local ENU frame of the POSI fixes: the configured one, else the
     first fix of the first logfile that has one (said in ``notes``), else (0, 0)."""
-    if opts.ipin.origin_lat_deg is not None and opts.ipin.origin_lon_deg is not None:
-        return opts.ipin.origin_lat_deg, opts.ipin.origin_lon_deg
+    if opts.origin_lat_deg is not None and opts.origin_lon_deg is not None:
+        return opts.origin_lat_deg, opts.origin_lon_deg
     first = next((lg for lg in logs if len(lg.num["POSI"])), None)
     if first is None:
         return 0.0, 0.0
     lat0, lon0 = float(first.num["POSI"][0, 2]), float(first.num["POSI"][0, 3])
     notes.append(f"POSI fixes in a local ENU frame at the first fix of {first.path.name}: lat {lat0:.9f}, "
-                 f"lon {lon0:.9f} (pdr.ipin.origin_lat_deg / origin_lon_deg set it)")
+                 f"lon {lon0:.9f} (ingest.ipin.origin_lat_deg / origin_lon_deg set it)")
     return lat0, lon0
 
 
@@ -335,7 +334,7 @@ class IpinReader(Reader):
         return all(_looks_like_logfile(_first_lines(f)) for f in files)
 
     def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
-        opts = self.options
+        opts = cfg.ipin
         logs: list[_Log] = []
         seen: dict[str, Path] = {}
         for f in files:
@@ -359,7 +358,7 @@ class IpinReader(Reader):
         pressure: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for lg in logs:
             f = lg.path
-            if opts.ipin.use_imui and len(lg.num["IMUI"]) > 0:
+            if opts.use_imui and len(lg.num["IMUI"]) > 0:
                 sp, extra = self._imui_poses(lg, opts)
                 pf = sp.to_frame(lg.walk_id)
                 for k, v in extra.items():
@@ -417,7 +416,7 @@ class IpinReader(Reader):
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             merge_duplicate_readings=True,
-            enu_origin=None if opts.ipin.origin_lat_deg is not None or not fix_where else (lat0, lon0),
+            enu_origin=None if opts.origin_lat_deg is not None or not fix_where else (lat0, lon0),
             pressure=pressure,
             ble=pd.concat(ble, ignore_index=True) if ble else None,
             where={
@@ -430,7 +429,7 @@ class IpinReader(Reader):
         )
 
     @staticmethod
-    def _imui_poses(lg: _Log, opts: PdrConfig):
+    def _imui_poses(lg: _Log, opts: IpinConfig):
         """Per-step poses from IMUI lines; duplicate packets and zero increments are skipped with counts."""
         imui, lines = lg.num["IMUI"], lg.line["IMUI"]
         # fields after the tag: t, packet, step, dx, dy, dz, dtheta_deg, cov[10]
@@ -442,13 +441,13 @@ class IpinReader(Reader):
         if (still & ~dup).any():
             lg.skipped["IMUI (no motion)"] += int((still & ~dup).sum())
         m = imui[keep]
-        sign = -1.0 if opts.ipin.imui_z_down else 1.0
+        sign = -1.0 if opts.imui_z_down else 1.0
         dx, dy = m[:, 3], sign * m[:, 4]
         dth = sign * np.deg2rad(m[:, 6])
         t0 = min(lg.t_first, float(m[0, 0]) if len(m) else lg.t_first)
         sp = poses_from_increments(t0, m[:, 0], dx, dy, dth)
         extra: dict[str, np.ndarray] = {}
-        if opts.ipin.imui_covariance:
+        if opts.imui_covariance:
             cov = m[:, 7:17]   # upper triangle of the 4x4 covariance of (dx, dy, dz, dtheta), row by row
             var = cov[:, [0, 4, 9]]
             bad = np.flatnonzero((var < 0).any(axis=1))

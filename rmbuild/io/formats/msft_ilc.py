@@ -21,8 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.ingest import IngestConfig
-from rmbuild.config.pdr import PdrConfig
+from rmbuild.config.ingest import IngestConfig, MsftIlcConfig
 from rmbuild.errors import InputError
 from rmbuild.io.compressed import read_bytes
 from rmbuild.io.floor_image import attach_image, read_image
@@ -377,7 +376,7 @@ def _stream(r: _Rows, ncols: int, has_accuracy: bool) -> _Stream:
     return _Stream(r.t_ms[o] / 1000.0, r.num[o, :ncols], acc, r.line[o])
 
 
-def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
+def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
     """Parse one trace file into time-sorted series and tables (no PDR yet)."""
     raw = _read_bytes(path)
     try:
@@ -418,7 +417,7 @@ def parse_trace(path: Path, opts: PdrConfig) -> _Trace:
     empty = np.flatnonzero(bssid == "")
     if len(empty):
         raise InputError("TYPE_WIFI: empty BSSID", f"{path}:{w.line[empty[0]]}")
-    fresh = (w.t_ms - w.num[:, 2]) <= opts.msft_ilc.max_wifi_age_s * 1000.0
+    fresh = (w.t_ms - w.num[:, 2]) <= opts.max_wifi_age_s * 1000.0
     n_stale = int((~fresh).sum())
     idx = np.flatnonzero(fresh)
     # one reading per (scan time, BSSID): phones list a BSSID twice when it is heard on two channels;
@@ -541,7 +540,7 @@ class MsftIlcReader(Reader):
         return all(_looks_like_trace(_first_lines(f, 1)) for f in traces)
 
     def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:
-        opts = self.options
+        opts = cfg.msft_ilc
         traces = [f for f in files if f.name not in COMPANION_FILES]
         notes: list[str] = []
         plans = _floor_plans(files)
@@ -603,7 +602,7 @@ class MsftIlcReader(Reader):
                          + "): floors of different buildings in one workspace; ingest one site at a time")
         if n_wifi:
             notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
-                         f"{opts.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
+                         f"{opts.max_wifi_age_s:g} s before their scan (stale cache entries)")
         if n_ble_dup:
             notes.append(f"merged {n_ble_dup:,} TYPE_BEACON rows repeating a MAC at one time (first kept)")
         if n_dup:

@@ -17,8 +17,8 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 
+from rmbuild.baselines.config import PflConfig
 from rmbuild.config.evaluate import KnnConfig
-from rmbuild.config.localize import PflConfig
 from rmbuild.localize.base import Query, as_reference, checked, sub_config
 from rmbuild.localize.knn import KnnLocalizer
 

@@ -147,7 +147,7 @@ def building_reports_task(workspace: str, results: dict[str, dict], evaluate_tom
 
 def write_building_reports(workspace: str | Path, results: dict[str, dict], eval_cfg: Any, index: Path) -> None:
     """building/<command>.json of each stage some floor ran now, and the page linking the floors' reports."""
-    from rmbuild.stages.floor_eval import floor_totals
+    from rmbuild.stages.building.evaluate import floor_totals
 
     log = logging.getLogger(__name__)
     ok = {n: r for n, r in results.items() if r.get("ok")}

@@ -11,7 +11,7 @@ previous fix (Fig. 4: 0.04 per second up to 0.4). The paper's eq. 8 prints ``max
 would always give 1 (the fix overwrites); the clamp to 1 is what the text and its figures mean. ``Q``
 rises with the number of APs in the scan (Fig. 6: 0 at 2 APs, 0.3 at 5). The static variant uses a fixed
 ``α = static_weight`` (the paper's Fig. 9c: 0.5). The first fix is taken as it is. (A Q from the spread
-of the most likely RPs was measured and not kept: docs/localizers.md.)
+of the most likely RPs was measured and not kept: docs/notes/localizers.md.)
 
 The paper's PDR heading comes from a compass; here each walk's PDR is in its own frame, so its rotation
 into the map frame is the least-squares angle between the PDR and the fixes' displacements over the last
@@ -25,10 +25,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import BayesConfig, SmartLocatorConfig
+from rmbuild.baselines.bayes import NaiveBayesLocalizer
+from rmbuild.baselines.config import BayesConfig, SmartLocatorConfig
+from rmbuild.baselines.smoothing import frame_rotation, pdr_positions, rotate
 from rmbuild.localize.base import Query, as_reference, checked, sub_config
-from rmbuild.localize.bayes import NaiveBayesLocalizer
-from rmbuild.localize.smoothing import frame_rotation, pdr_positions, rotate
 
 
 class SmartLocator:

@@ -4,7 +4,7 @@ A reader says which floor its data is on with an optional ``floor`` column: on `
 on one floor) or on ``poses`` (a walk that changes floor: stairs, lift). A walk whose poses change floor is
 cut at each change into per-floor segments ``<walk>@<floor>`` (``#2``, ``#3`` for a second visit of the
 same floor); its Wi-Fi readings and fixes go to the segment whose time span holds them. An input without
-floor columns is split where its barometers show floor changes (:mod:`rmbuild.ingest_barometer`), the
+floor columns is split where its barometers show floor changes (:mod:`rmbuild.ingest.barometer`), the
 floors named by level counted from the lowest one found. Inputs without either, or with a single floor,
 stay one floor.
 Every cut of a walk is a *transition* (``RawInput.transitions``): the place where its two segments meet,
@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.errors import InputError
-from rmbuild.ingest_barometer import barometer_floors
+from rmbuild.ingest.barometer import barometer_floors
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.pdr import ImuSignals
 
@@ -66,6 +66,7 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     segments = _segments(raw, pf, walk_floor or {}, cuts or {})
     floors = list(dict.fromkeys(f for _, f, _ in segments))
     if len(floors) <= 1:
+        raw.floor_name = floors[0] if floors and floors[0] else None
         return None
     raw.transitions = _transitions(segments)
     return {f: _floor_input(raw, f, [(w, s) for w, ff, s in segments if ff == f]) for f in floors}

@@ -22,9 +22,9 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.localize import BayesConfig, MllConfig
+from rmbuild.baselines.bayes import NaiveBayesLocalizer
+from rmbuild.baselines.config import BayesConfig, MllConfig
 from rmbuild.localize.base import Query, as_reference, checked, sub_config
-from rmbuild.localize.bayes import NaiveBayesLocalizer
 
 
 def walked_between(t_scan: np.ndarray, steps: pd.DataFrame | None) -> np.ndarray:

@@ -21,7 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import SsdConfig, SsrConfig
+from rmbuild.baselines.config import SsdConfig, SsrConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
 

@@ -80,7 +80,7 @@ def building_report(workspace: str | Path, command: str, stage: str) -> dict:
             tot[k] = sum(v for v in vals if isinstance(v, int | float))
     tot["time_s"] = round(sum(_total_time(r) for r in reports.values()), 3)
     if stage == "optimize":
-        from rmbuild.stages.floor_frames import floor_frames
+        from rmbuild.stages.building.frames import floor_frames
 
         frames = floor_frames(workspace)
         if frames is not None:
@@ -105,21 +105,27 @@ def no_viewer_for_building(viewer: Any, floors: dict[str, Path]) -> None:
 
 
 def building_page(workspace: str | Path, reports: dict[str, dict], index: Path) -> str:
-    """A small HTML page linking each floor's report, with the building's evaluate totals when present."""
-    import html
+    """The building's page (:func:`rmbuild.viz.report.building_html`): per floor its figures from each stage's
+    building report and a link to its own report (``reports``: floor -> what `report` returned for it, with
+    its "path"), each floor's evaluation table, the floors skipped and the floor classification."""
     import os
 
-    rows = "".join(f'<li><a href="{html.escape(os.path.relpath(r["path"], index.parent))}">floor '
-                   f"{html.escape(n)}</a> ({len(r['figures'])} figures)</li>" for n, r in reports.items())
-    ev = building_report_path(workspace, "evaluate")
-    fc = None
-    if ev.is_file():
-        try:
-            fc = json.loads(ev.read_text()).get("building", {}).get("floor_classification")
-        except (ValueError, RecursionError):
-            fc = None
-    hit = "" if not fc else (f"<p>Floor hit rate on the test scans: {fc['hit_rate']:.1%} of {fc['n']} "
-                             f"(single scans {fc['hit_rate_single_scan']:.1%}).</p>")
-    title = html.escape(f"rmbuild building {Path(workspace).name}")
-    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{title}</title></head><body>"
-            f"<h1>{title}</h1><ul>{rows}</ul>{hit}</body></html>\n")
+    from rmbuild.viz.report import building_html
+
+    stages = {s: _read_building(workspace, cmd) for s, cmd in (("ingest", "ingest"), ("optimize", "optimize"),
+                                                                ("map", "export-map"), ("evaluate", "evaluate"))}
+    floors = {}
+    for name in building_floors(workspace) or {}:
+        link = os.path.relpath(reports[name]["path"], index.parent) if name in reports else None
+        floors[name] = (link, {s: (rep.get("floors") or {}).get(name) for s, rep in stages.items()})
+    ev = stages["evaluate"].get("building") if stages["evaluate"] else None
+    return building_html(f"rmbuild building {Path(workspace).name}", floors, ev)
+
+
+def _read_building(workspace: str | Path, command: str) -> dict:
+    """A stage's building report ({} when absent or unreadable)."""
+    p = building_report_path(workspace, command)
+    try:
+        return json.loads(p.read_text()) if p.is_file() else {}
+    except (OSError, ValueError, RecursionError):  # unreadable, malformed or absurdly nested: no figures
+        return {}

@@ -17,7 +17,7 @@ from typing import ClassVar, Protocol, runtime_checkable
 import numpy as np
 import pandas as pd
 
-from rmbuild.config.localize import SmoothingConfig
+from rmbuild.baselines.config import SmoothingConfig
 from rmbuild.localize.base import Query, checked, sub_config
 
 

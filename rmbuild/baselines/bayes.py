@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import BayesConfig
+from rmbuild.baselines.config import BayesConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
 

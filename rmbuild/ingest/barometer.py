@@ -10,7 +10,7 @@ placed scans) to the placed scans of the same levels; an offset must put at leas
 the others, until none moves (at most :data:`MAX_ROUNDS` rounds): a walk placed early, against the few
 scans one walk has of a level, may sit a floor off, and the others' scans correct it.
 
-Tried and dropped (simulated three-floor buildings, docs/floors.md): counting a scan on a level without
+Tried and dropped (simulated three-floor buildings, docs/notes/floors.md): counting a scan on a level without
 placed scans as its largest distance to a placed level (it pushed walks onto the known levels), and the
 first pass alone (it put the top floor's walks one floor down).
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from rmbuild.ingest_checks import scan_ids
+from rmbuild.ingest.checks import scan_ids
 from rmbuild.io.formats.base import RawInput
 from rmbuild.localize.floor import floor_distances
 from rmbuild.pdr.baro import floor_changes

@@ -17,7 +17,7 @@ from rmbuild.config.ingest import IngestConfig
 from rmbuild.config.pdr import PdrConfig
 from rmbuild.errors import InputError
 from rmbuild.geometry import wrap
-from rmbuild.ingest_checks import scan_ids, walk_time_ordered
+from rmbuild.ingest.checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
 from rmbuild.limits import MAX_APS, MAX_COORD_M, MAX_FINGERPRINT_CELLS, MAX_WALK_PATH_M, MAX_WALK_POSES
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr

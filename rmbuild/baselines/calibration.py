@@ -9,7 +9,7 @@ average out over repeated scans), and the weaker device's means near its detecti
 readings it happened to detect. Ordinary least squares of device on map then (a) shrinks ``k`` towards 0 by
 the map side's noise (regression dilution) and (b) flattens it further because the device's low end is
 truncated upwards. On the synthetic venue a (1.25, −6 dB) device came out as k = 0.68 ± 0.03, b = −42 ± 2 dB
-from 60 standing spots (bench/bench_localizers.py, eight draws; docs/localizers.md). The fit here is a
+from 60 standing spots (bench/bench_localizers.py, eight draws; docs/notes/localizers.md). The fit here is a
 Deming (errors-in-variables) regression with error-variance ratio ``k²`` (both devices see the same radio
 noise, the device scaled by k), iterated, on the pairs whose estimated true level lies at least
 :data:`FLOOR_MARGIN_DB` above both devices' detection floors (selected on the fit's latent value, not on
@@ -24,7 +24,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmbuild.config.localize import OfflineCalibrationConfig
+from rmbuild.baselines.config import OfflineCalibrationConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, checked, sub_config
 from rmbuild.radiomap.reference import ReferenceSet
@@ -162,7 +162,7 @@ def calibrate_query(query: Query, k: float, b: float, device_model: str = "devic
 
 
 class OfflineCalibrated:
-    """A localizer run on scans mapped back by a device model fitted offline (``[evaluate.offline_cal]``)."""
+    """A localizer run on scans mapped back by a device model fitted offline (``[evaluate.baselines.offline_cal]``)."""
 
     name: ClassVar[str] = "offline_cal"
 

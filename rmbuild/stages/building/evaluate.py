@@ -5,6 +5,10 @@ The floor of each test scan is classified against the fingerprints of every floo
 correctly classified scans, and the combined error of the IPIN competition and the Kaggle Indoor Location &
 Navigation challenge: x, y error + ``floor_penalty_m`` per floor off. The x, y part of a scan classified on
 the wrong floor is its estimate on its true floor's map (a lower bound of what the wrong floor's map gives).
+
+A floor that cannot be scored (one walk, no ground truth, ...) is skipped with its reason, named in the
+building report (``building`` → ``skipped_floors``) and the printed table; the others are scored. Only when
+no floor can be scored is the building an error.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from rmbuild.config import EvaluateConfig
-from rmbuild.errors import WorkspaceError
+from rmbuild.errors import ConfigError, InputError, WorkspaceError
 from rmbuild.evaluate.localization import error_stats, split_walks
 from rmbuild.io.workspace import Workspace, building_floors, floor_levels
 from rmbuild.localize.base import Query
@@ -27,16 +31,31 @@ from rmbuild.types import Dataset, Fingerprints
 
 def run_building(workspace: str | Path, floors: dict[str, Path], cfg: EvaluateConfig,
                  fn: Callable[[Path], tuple[dict, str]]) -> tuple[dict, str]:
-    """Evaluate ``floors`` with ``fn`` (the single-floor stage), then classify floors over the building."""
+    """Evaluate ``floors`` with ``fn`` (the single-floor stage), then classify floors over the building; a
+    floor that cannot be scored is skipped (an InputError naming the floors when none can be)."""
     tables: dict[str, str] = {}
+    skipped: dict[str, str] = {}
 
     def one(name: str, path: Path) -> dict:
-        report, tables[name] = fn(path)
+        try:
+            report, tables[name] = fn(path)
+        except ConfigError:
+            raise
+        except InputError as e:  # said of the floor's workspace: the floor's name says that here
+            skipped[name] = e.problem if e.where == str(path) else str(e)
+            return {}
         return report
 
-    report = run_floors(workspace, "evaluate", floors, one,
-                        totals=lambda root, reports: floor_totals(root, reports, cfg))
+    def totals(root: Path, reports: dict[str, dict]) -> dict:
+        scored = {n: r for n, r in reports.items() if n not in skipped}
+        out = floor_totals(root, scored, cfg) if scored else {}
+        return {**out, "skipped_floors": dict(skipped)} if skipped else out
+
+    report = run_floors(workspace, "evaluate", floors, one, totals=totals)
+    if skipped and not tables:
+        raise InputError("no floor could be evaluated: " + "; ".join(f"{n}: {why}" for n, why in skipped.items()))
     text = "\n".join(f"floor {n}:\n{t}" for n, t in tables.items())
+    text += "".join(f"\nfloor {n} skipped: {why}" for n, why in skipped.items())
     return report, text + "\n" + building_table(report["building"])
 
 
@@ -46,7 +65,7 @@ def floor_totals(root: Path, reports: dict[str, dict], cfg: EvaluateConfig) -> d
     levels = floor_levels(root)
     data = {n: _floor_data(p) for n, p in floors.items()}
     bssids = np.array(sorted(set().union(*(set(map(str, fp.bssids)) for _, fp in data.values()))), dtype=object)
-    refs = [_refs(ds, fp, reports[n]["map_walks"] if n in reports else split_walks(ds, cfg)[0], bssids)
+    refs = [_refs(ds, fp, reports[n]["map_walks"] if n in reports else _map_walks(ds, cfg), bssids)
             for n, (ds, fp) in data.items()]
     names = list(floors)
     rows = []
@@ -61,6 +80,15 @@ def floor_totals(root: Path, reports: dict[str, dict], cfg: EvaluateConfig) -> d
     scans = pd.concat(rows, ignore_index=True)
     return {"floor_classification": _classification(scans), "floor_penalty_m": cfg.floor_penalty_m,
             "maps": _combined(scans, cfg.floor_penalty_m)}
+
+
+def _map_walks(ds: Dataset, cfg: EvaluateConfig) -> list[str]:
+    """The walks a floor that was not evaluated offers the floor classification: its map walks, or every
+    walk when it cannot be split (a single walk)."""
+    try:
+        return split_walks(ds, cfg)[0]
+    except InputError:
+        return [str(w) for w in ds.walks["walk_id"]]
 
 
 def _floor_data(path: Path) -> tuple[Dataset, Fingerprints]:

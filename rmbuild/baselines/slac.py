@@ -40,11 +40,11 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 
+from rmbuild.baselines.calibration import to_map_units
+from rmbuild.baselines.config import SlacConfig
 from rmbuild.blas import one_blas_thread
-from rmbuild.config.localize import SlacConfig
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, ReferenceSet, as_reference, checked, sub_config
-from rmbuild.localize.calibration import to_map_units
 
 log = logging.getLogger(__name__)
 

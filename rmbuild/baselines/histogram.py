@@ -38,10 +38,10 @@ from typing import ClassVar
 import numpy as np
 from scipy import sparse
 
-from rmbuild.config.localize import HistogramLocConfig
+from rmbuild.baselines.config import HistogramLocConfig
+from rmbuild.baselines.smoothing import frame_rotation, pdr_positions, rotate
 from rmbuild.errors import InputError
 from rmbuild.localize.base import Query, checked, sub_config
-from rmbuild.localize.smoothing import frame_rotation, pdr_positions, rotate
 from rmbuild.radiomap.histogram import MIN_MOVE_M, direction_sector
 
 _BLOCK = 256

@@ -1,7 +1,8 @@
-"""Config of the localizers beyond kNN: SLAC, MLL, PFL, SSD, SSR, naive Bayes, SmartLocator's fusion, the
-RSS-histogram matchers, Kalman smoothing and the offline device calibration (docs/localizers.md).
+"""Settings of the paper baselines (TOML ``[evaluate.baselines.<name>]``): SLAC, MLL, PFL, SSD, SSR, naive
+Bayes, SmartLocator's fusion, the RSS-histogram matchers, Kalman smoothing and the offline device
+calibration (docs/baselines.md). ``rmbuild config --all`` prints them; ``rmbuild config`` leaves them out.
 
-Every number the papers give is a field with its paper default (docs/localizers.md cites them): SLAC (He,
+Every number the papers give is a field with its paper default (docs/baselines.md cites them): SLAC (He,
 Chan, Yu, Liu, UbiComp 2015) and its baselines MLL, PFL, SSD, SSR and offline linear fitting; SmartLocator
 (Becker, Jäger, Süß, ICONS 2015: naive Bayes, auto-adaptive fusion); the subway-station Wi-Fi + PDR paper
 (RSS histograms, direction-aware fingerprints, Kalman smoothing); UILoc (Sensors 2018: particle step and
@@ -11,7 +12,7 @@ heading corrections). Fields the papers leave open carry our default and say so.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 from rmbuild.config.base import bounded, check_ranges
@@ -63,7 +64,7 @@ class SlacConfig:
     device_model: Literal["device", "calibration"] = "device"
     # Particle weight (eq. 22). "distance": He et al. 2015, walked vs. estimated window distance only;
     # "distance_signal": also the Gaussian likelihood of the scans given the weighted RPs (ours; makes
-    # [k, b] identifiable when the distance test alone is not, see docs/localizers.md).
+    # [k, b] identifiable when the distance test alone is not, see docs/notes/localizers.md).
     particle_weight: Literal["distance", "distance_signal"] = "distance_signal"
     # dB; per-AP noise std of the signal likelihood under particle_weight = "distance_signal" (ours).
     signal_sigma_db: float = bounded(4.0, 0.1, 100.0)
@@ -88,8 +89,8 @@ class SlacConfig:
     # After ξ <= η sqrt(Var δ): continue with P = 1 and fixed [k, b, α, β] (He et al. 2015). False: never.
     converge: bool = True
     # scans; the convergence test runs only once at least this many scans of the walk were seen (ours;
-    # with fewer, the particles collapse on little evidence and the test passes too early: measured on the
-    # synthetic venue, k stopped at 1.0-1.1 of 1.25 with 7). 0 = the window size M (He et al. 2015).
+    # with fewer, the particles collapse on little evidence and the test passes too early:
+    # docs/notes/localizers.md). 0 = the window size M (He et al. 2015).
     min_scans_to_converge: int = bounded(30, 0, 100000)
     # 1; projected-gradient iterations of the joint optimisation per window (warm-started).
     solver_iters: int = bounded(60, 1, 10000)
@@ -305,7 +306,7 @@ class HistogramLocConfig:
 @dataclass(frozen=True)
 class OfflineCalibrationConfig:
     """`offline_cal`: a localizer run on scans mapped back by a device model fitted offline (SLAC's
-    comparison case), φ_device = k ψ_map + b; see rmbuild.localize.calibration.fit_device_model."""
+    comparison case), φ_device = k ψ_map + b; see rmbuild.baselines.calibration.fit_device_model."""
 
     # 1; the test device's gain k against the map's device (1 = same device).
     k: float = bounded(1.0, 0.001, 100.0)
@@ -318,3 +319,27 @@ class OfflineCalibrationConfig:
         check_ranges(self, "offline_cal.")
         if self.base == "offline_cal":
             raise ValueError("offline_cal.base must name another localizer")
+
+
+@dataclass(frozen=True)
+class BaselinesConfig:
+    """Every baseline's settings, one table each (``[evaluate.baselines.slac]``, ...)."""
+
+    # SLAC (He et al. 2015) and its comparison cases MLL, PFL, SSD, SSR and offline linear fitting
+    slac: SlacConfig = field(default_factory=SlacConfig)
+    mll: MllConfig = field(default_factory=MllConfig)
+    pfl: PflConfig = field(default_factory=PflConfig)
+    ssd: SsdConfig = field(default_factory=SsdConfig)
+    ssr: SsrConfig = field(default_factory=SsrConfig)
+    offline_cal: OfflineCalibrationConfig = field(default_factory=OfflineCalibrationConfig)
+    # SmartLocator (Becker et al. 2015): naive Bayes and its fusion with PDR
+    nb: BayesConfig = field(default_factory=BayesConfig)
+    smartloc: SmartLocatorConfig = field(default_factory=SmartLocatorConfig)
+    # the subway-station paper: RSS histograms and the Kalman post-filter of the *_kf variants
+    hist: HistogramLocConfig = field(default_factory=HistogramLocConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+
+    def validate(self) -> None:
+        for sub in (self.slac, self.mll, self.pfl, self.ssd, self.ssr, self.offline_cal, self.nb, self.smartloc,
+                    self.hist, self.smoothing):
+            sub.validate()

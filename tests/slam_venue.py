@@ -1,4 +1,4 @@
-"""A small, seeded synthetic venue for the slam package's own tests and benchmarks.
+"""A small, seeded synthetic venue for the slam package's tests and benchmarks (kept out of the package).
 
 Not the product simulator (``rmbuild.synthetic``): a grid of corridors, APs with log-distance path loss
 and a smooth shadowing field, walks that wander the corridor graph, foot-IMU-like dead reckoning in each
@@ -119,7 +119,7 @@ def make_venue(
         t0 = t[-1] + 100.0
         dist = (np.sin(xy @ mag_k.T + mag_ph) * mag_disturbance_rad).sum(axis=1) / 2
         yaw = hd + dist + rng.normal(0, 0.02, steps_per_walk)
-        walks.append({"walk_id": wid, "device_id": "d0", "user_id": "u0", "role": "", "source": "slam.testing"})
+        walks.append({"walk_id": wid, "device_id": "d0", "user_id": "u0", "role": "", "source": "slam_venue"})
         poses.append(pd.DataFrame({
             "walk_id": wid, "step": np.arange(steps_per_walk), "t_s": t, "x_m": own[:, 0], "y_m": own[:, 1],
             "heading_rad": th,

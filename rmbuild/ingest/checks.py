@@ -7,7 +7,7 @@
   phone reading 10 dB stronger): co-located scans are found without positions, by the strongest AP they
   hear and the agreement of their readings after removing a constant, and the walk's median difference to
   the other walks is its offset. The optimizer removes offsets per device (``device_id``: the phones'
-  offsets, docs/optimize.md step 1), not per walk, so such a walk of a device shared with others links poorly;
+  offsets, docs/notes/optimize.md step 1), not per walk, so such a walk of a device shared with others links poorly;
   the ``slac`` localizer calibrates devices (RSS = k·φ + b; He, Chan, Yu and Liu, "Calibration-Free
   Fusion of Step Counter and Wireless Fingerprints for Indoor Localization", UbiComp 2015) only when
   localizing.
@@ -29,7 +29,7 @@ from rmbuild.types import Dataset
 MIN_WALK_STEPS = 5
 #: dB; a walk whose readings are at least this much above or below the others' at the same places is
 #: reported (on the MS ILC floors site1/F1 and site2/F4 the walks' estimated offsets are within ±6 dB,
-#: 90 % within ±3.5 dB: docs/reliability.md)
+#: 90 % within ±3.5 dB: docs/notes/reliability.md)
 OFFSET_WARN_DB = 6.0
 #: scans compared for the device-offset check need this many APs in common
 MIN_SHARED_APS = 5
@@ -62,12 +62,30 @@ class _Codes:
 def evidence_warnings(ds: Dataset) -> list[str]:
     """Warnings about duplicated walks, very short walks and device offsets (empty when all is plausible)."""
     codes = _Codes.of(ds)
-    return duplicate_walks(ds, codes) + short_walks(ds, codes) + [
-        f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
-        "the optimizer removes offsets per device (device_id), not per walk, so it may stay unlinked; the slac "
-        "localizer calibrates devices when localizing"
-        for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB
-    ]
+    offsets = {w: off for w, off in walk_rss_offsets(ds, codes=codes).items() if abs(off) >= OFFSET_WARN_DB}
+    return duplicate_walks(ds, codes) + short_walks(ds, codes) + offset_warning(offsets)
+
+
+#: walks named with their offset in the device-offset warning; past this, their number
+NAMED_OFFSETS = 8
+
+
+def offset_warning(offsets: dict[str, float]) -> list[str]:
+    """One warning for every walk reading :data:`OFFSET_WARN_DB` or more off the others (walk -> dB),
+    largest offsets first; [] when there is none."""
+    if not offsets:
+        return []
+    ranked = sorted(offsets.items(), key=lambda kv: -abs(kv[1]))
+    shown = ", ".join(f"{w!r} {off:+.1f} dB" for w, off in ranked[:NAMED_OFFSETS])
+    more = f" and {len(ranked) - NAMED_OFFSETS} more" if len(ranked) > NAMED_OFFSETS else ""
+    tail = ("the optimizer removes offsets per device (device_id), not per walk, so {} may stay unlinked; the slac "
+            "localizer calibrates devices when localizing")
+    if len(ranked) == 1:
+        w, off = ranked[0]
+        return [f"walk {w!r} reads {off:+.1f} dB against the other walks at the same places (a device offset?); "
+                + tail.format("it")]
+    return [f"{len(ranked)} walks read {OFFSET_WARN_DB:g} dB or more against the other walks at the same places "
+            f"(a device offset?): {shown}{more}; " + tail.format("they")]
 
 
 def _walk_digests(df: pd.DataFrame, cols: list[str], t0: pd.Series, walk: tuple[np.ndarray, pd.Index],
