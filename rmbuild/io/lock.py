@@ -32,7 +32,8 @@ from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 
-from rmbuild.errors import WorkspaceBusyError, WorkspaceError
+from rmbuild.errors import RmbuildError, WorkspaceBusyError, WorkspaceError
+from rmbuild.io.layout import FLOORS_DIR, building_floors
 
 log = logging.getLogger(__name__)
 
@@ -70,11 +71,8 @@ def workspace_lock(root: str | Path, command: str, exclusive: bool = True) -> It
 
 def _building_of(root: Path) -> Path | None:
     """The building whose floor ``root`` is (its manifest lists it), None for any other workspace."""
-    from rmbuild.errors import RmbuildError
-    from rmbuild.io.workspace import building_floors  # the owner of the layout (it imports this module)
-
     r = root.resolve()
-    if r.parent.name != "floors":
+    if r.parent.name != FLOORS_DIR:
         return None
     try:
         floors = building_floors(r.parent.parent) or {}

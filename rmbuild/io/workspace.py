@@ -53,19 +53,17 @@ import pandas as pd
 from rmbuild import __version__
 from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.io.atomic import clean_json, recover_dir, refuse_link, replacing_dir, write_json_atomic
+from rmbuild.io.layout import FLOORS_DIR, MANIFEST, MAX_MARKER_BYTES, WORKSPACE_FORMAT, building_floors
+from rmbuild.io.layout import is_marker as _is_marker
+from rmbuild.io.layout import read_marker as _read_marker
 from rmbuild.io.lock import holds_lock, workspace_lock
 from rmbuild.types import WIFI_COLUMNS, Dataset, Fingerprints
 
 #: version of this layout; 1 kept the stage reports and checksums outside the stage directories
 SCHEMA_VERSION = 2
-#: the marker's "format": a manifest.json without it is not an rmbuild workspace
-WORKSPACE_FORMAT = "rmbuild-workspace"
-MANIFEST = "manifest.json"
 RECORD = "stage.json"
 REPORT = "report.json"
 CONFIG = "config.toml"
-#: a marker or record larger than this is not one of ours (never read a huge file to find out)
-MAX_MARKER_BYTES = 1 << 20
 #: bytes; a Parquet column's dictionary beyond this falls back to plain encoding. pyarrow's 1 MB default
 #: builds and then drops large dictionaries of continuous columns (times, coordinates): 16 KB wrote the
 #: ingest tables ~1.5x faster, and smaller (bench/bench_ingest.py)
@@ -153,8 +151,7 @@ for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
     ARTEFACTS[f"{_stage}.rrd"] = f"{_stage}.rrd"
 
-#: the floors' workspaces, and the building-level reports, relative to a building workspace's root
-FLOORS_DIR = "floors"
+#: the building-level reports, relative to a building workspace's root (its floors: FLOORS_DIR)
 BUILDING_DIR = "building"
 
 #: walk ids become file names (optimize/tum/<name>.txt): at most this many characters before the suffix
@@ -545,23 +542,6 @@ class Workspace:
         return Fingerprints.from_long(self.read_table("data.fingerprints"))
 
 
-def building_floors(root: str | Path) -> dict[str, Path] | None:
-    """floor name -> the floor's workspace directory, for a building workspace; None for a single floor
-    (or no workspace at all: opening it reports that)."""
-    root = Path(root)
-    m = _read_marker(root)
-    if not _is_marker(m) or not isinstance((m or {}).get("floors"), list):
-        return None
-    out: dict[str, Path] = {}
-    for f in (m or {})["floors"]:
-        if not (isinstance(f, dict) and isinstance(f.get("name"), str) and isinstance(f.get("dir"), str)
-                and f["dir"].startswith(FLOORS_DIR + "/") and "/" not in f["dir"][len(FLOORS_DIR) + 1:]
-                and f["dir"][len(FLOORS_DIR) + 1:] not in ("", ".", "..")):
-            raise WorkspaceError(f"{root / MANIFEST}: malformed floor entry {str(f)[:120]}")
-        out[f["name"]] = root / f["dir"]
-    return out
-
-
 def floor_levels(root: str | Path) -> dict[str, int | None]:
     """floor name -> level (0 ground floor, -1 the first basement; None unknown) of a building workspace."""
     m = _read_marker(Path(root)) or {}
@@ -649,27 +629,6 @@ def _recover(root: Path) -> None:
                 recover()
         except WorkspaceError:  # busy (its holder recovers), or no lock can be created here
             pass
-
-
-def _read_marker(root: Path) -> dict | None:
-    """The parsed manifest.json of ``root`` (None when absent, unreadable, huge or not a JSON object)."""
-    p = root / MANIFEST
-    try:
-        if not p.is_file() or p.stat().st_size > MAX_MARKER_BYTES:
-            return None
-        m = json.loads(p.read_bytes())
-    except (OSError, ValueError, RecursionError):
-        return None
-    return m if isinstance(m, dict) else None
-
-
-def _is_marker(m: dict | None) -> bool:
-    """rmbuild's workspace marker, this layout's or the first one (schema 1, no "format" key)."""
-    if m is None:
-        return False
-    if m.get("format") == WORKSPACE_FORMAT:
-        return True
-    return m.get("schema_version") == 1 and "rmbuild_version" in m and isinstance(m.get("stages"), dict)
 
 
 def check_replaceable(root: Path, force: bool) -> None:
