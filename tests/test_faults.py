@@ -114,7 +114,7 @@ def building_input(tmp_path_factory) -> Path:
     return make_building_input(tmp_path_factory.mktemp("bfaults"))
 
 
-@pytest.mark.parametrize("delay_s, target", [(2.0, "worker"), (6.0, "worker"), (4.0, "client")])
+@pytest.mark.parametrize("delay_s, target", [(2.0, "worker"), (4.0, "client")])
 def test_a_killed_dask_worker_never_hangs_the_build(delay_s: float, target: str, building_input: Path,
                                                     tmp_path: Path) -> None:
     """A worker killed ~2 s into `build --scheduler local:2` hung the build (150 s and more), and killing the
