@@ -308,3 +308,37 @@ def test_a_local_cluster_started_early_is_warmed_and_fitted_to_the_floors() -> N
             time.sleep(0.2)
         assert len(client.scheduler_info()["workers"]) == 1
         assert run(_pid_after_warm_up, {"a": ()}, None)["a"]["ok"]
+
+
+def _logged_task(name: str, log: str) -> dict:
+    """Note each run of ``name`` in the file ``log``; "slow" takes 4 s (the round stays open meanwhile)."""
+    import os
+    import time
+
+    with open(log, "a") as f:
+        f.write(f"{name}\n")
+    if name == "slow":
+        time.sleep(4)
+    return {"ok": True, "pid": os.getpid()}
+
+
+def test_a_finished_task_is_not_run_again_when_its_worker_dies(tmp_path: Path) -> None:
+    """make fuzz (faults, issue 40): a worker killed just after its floor finished made Dask run the floor again
+    (the client still held the result's future), rewriting the floor after the build had recorded it done; the
+    next build then took the floor for one re-made by hand. A result is let go once fetched."""
+    import os
+    import signal
+
+    from rmbuild.stages.dask_run import run_tasks
+
+    log = tmp_path / "runs.txt"
+    log.write_text("")
+
+    def done(name: str, r: dict) -> None:
+        if name == "fast":
+            os.kill(r["pid"], signal.SIGKILL)  # the worker that ran it dies once its result is in
+
+    out = run_tasks(_logged_task, {"slow": ("slow", str(log)), "fast": ("fast", str(log))},
+                    parse_scheduler("local:2"), on_done=done)
+    assert out["fast"]["ok"] and out["slow"]["ok"]
+    assert sorted(log.read_text().split()) == ["fast", "slow"]

@@ -246,8 +246,13 @@ def venues(kind: str, seed: int, base: Path, root: Path, rng: np.random.Generato
         text = text.replace('name = "v1"', f"name = {json.dumps(bad)}")
     elif op == "inputs_missing":
         text = text.replace('inputs = ["schema"]', 'inputs = ["nowhere"]')
-    elif op == "inputs_outside":
-        text = text.replace('inputs = ["schema"]', f'inputs = [{json.dumps(str(_pick(rng, ["/etc", "/dev/null"])))}]')
+    elif op == "inputs_outside":  # not input files: a device, a folder of other files (inside the case: the
+        # error must name a file of the case)
+        (root / "other").mkdir()
+        (root / "other" / "notes.conf").write_text("[x]\ny = 1\n")
+        (root / "other" / "image.png").write_bytes(b"\x89PNG\r\n")
+        where = str(_pick(rng, [str(root / "other"), "/dev/null"]))
+        text = text.replace('inputs = ["schema"]', f"inputs = [{json.dumps(where)}]")
     elif op == "format":
         text = text.replace('format = "msft-ilc"', 'format = "bogus"')
     elif op == "config":

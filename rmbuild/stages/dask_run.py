@@ -158,7 +158,7 @@ def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
                for i, (name, args) in enumerate(items.items())}
     out: dict[str, dict] = {}
     for fut in as_completed(list(futures)):
-        name = futures[fut]
+        name = futures.pop(fut)
         try:
             out[name] = fut.result()
         except KilledWorker:
@@ -166,6 +166,10 @@ def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
                                                "next `rmbuild build` redoes it"}
         except Exception as e:  # the result could not come back
             out[name] = failed(e)
+        # let the result go: a worker that dies holding it would otherwise make Dask run the task again (a floor
+        # rewritten behind the build's back after it was recorded done)
+        fut.release()
+        del fut
         if on_done is not None:
             on_done(name, out[name])
     return {name: out[name] for name in items}

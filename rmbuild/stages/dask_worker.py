@@ -1,13 +1,15 @@
 """Run in every worker process of `rmbuild build`'s local Dask cluster as it starts (a Dask preload).
 
 On Linux the worker asks the kernel to kill it when the process that started it (rmbuild's, which holds the
-cluster's nannies) dies, however it dies (kill -9 included): no worker outlives the command.
+cluster's nannies) dies, however it dies (kill -9 included): no worker outlives the command. Dask's own
+warnings in the worker (a task cancelled when a peer died, ...) are not shown: rmbuild reports what failed.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import logging
 import os
 import signal
 import sys
@@ -35,3 +37,4 @@ def die_with_parent() -> bool:
 def dask_setup(worker: Any) -> None:
     """Dask's preload hook."""
     die_with_parent()
+    logging.getLogger("distributed").setLevel(logging.ERROR)
