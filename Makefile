@@ -81,16 +81,18 @@ bench-real: $(STAMP)
 bench-scan-rate: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m bench.bench_scan_rate
 
-## make fuzz: 10,000 mutated inputs (every format, config, anchors) under a memory cap, kill -9 / SIGINT
-## fault injection into every stage, degraded evidence; figures go to bench/results/{fuzz,faults,degraded}.json
-## (FUZZ_CASES, FUZZ_JOBS, FAULT_KILLS change the size and the worker count)
+## make fuzz: 10,000 mutated inputs (every format, config, anchors, floor plans, gzip bombs, venues files,
+## outputs aimed into a workspace, planted links) under a memory cap, kill -9 / SIGINT fault injection into
+## every stage and Dask workers killed during `build`, degraded evidence; figures go to
+## bench/results/{fuzz,faults,degraded}.json (FUZZ_CASES, FUZZ_JOBS, FAULT_KILLS, BUILD_KILLS change the size)
 FUZZ_CASES ?= 10000
 FUZZ_JOBS ?= 2
 FAULT_KILLS ?= 25
+BUILD_KILLS ?= 20
 fuzz: $(STAMP)
 	export MPLBACKEND=Agg; \
 	$(BIN)/python -m bench.fuzz --cases $(FUZZ_CASES) --jobs $(FUZZ_JOBS) --out bench/results/fuzz.json; a=$$?; \
-	$(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --out bench/results/faults.json; b=$$?; \
+	$(BIN)/python -m bench.fuzz.faults --kills $(FAULT_KILLS) --build-kills $(BUILD_KILLS) --out bench/results/faults.json; b=$$?; \
 	$(BIN)/python -m bench.fuzz.degraded --out bench/results/degraded.json; c=$$?; \
 	exit $$(( a | b | c ))
 

@@ -19,9 +19,13 @@ import numpy as np
 import shapely
 
 from rmbuild import geometry
+from rmbuild.limits import MAX_COORD_M, MAX_PLAN_SIZE_M, MAX_PLAN_VERTICES
 
 # m; cell of the distance field
 FIELD_RESOLUTION_M = 0.5
+# cells; the distance field's resolution coarsens for a plan larger than this at FIELD_RESOLUTION_M (2 km at
+# ~1 m: bounded memory for the largest plan accepted, MAX_PLAN_SIZE_M)
+FIELD_MAX_CELLS = 4_000_000
 # m; the field extends this far beyond the plan
 FIELD_MARGIN_M = 20.0
 # deg; a lon/lat plan spanning more than this (about 5 km) is no building: its coordinates must be metres
@@ -105,7 +109,10 @@ class FloorPlan:
     def distance_field(self) -> tuple[np.ndarray, tuple[float, float], float]:
         """(grid (rows, cols) signed distance [m], origin (x, y) of cell (0, 0), resolution [m])."""
         if self._field is None:
-            self._field = _signed_distance(self.walkable, self.bounds, FIELD_RESOLUTION_M, FIELD_MARGIN_M)
+            x0, y0, x1, y1 = self.bounds
+            cells = (x1 - x0 + 2 * FIELD_MARGIN_M) * (y1 - y0 + 2 * FIELD_MARGIN_M) / FIELD_RESOLUTION_M**2
+            res = FIELD_RESOLUTION_M * max(1.0, float(np.sqrt(cells / FIELD_MAX_CELLS)))
+            self._field = _signed_distance(self.walkable, self.bounds, res, FIELD_MARGIN_M)
         return self._field
 
 
@@ -117,7 +124,9 @@ def from_features(features: list[dict], to_local, name: str = "") -> FloorPlan:
     - otherwise the floor outline (the polygon with ``"type": "floor"``, else the first one) is walkable
       and every other polygon (shops, rooms, obstacles) is cut out of it.
 
-    ``to_local``: maps an (n, 2) array of the GeoJSON's coordinates to local metres.
+    ``to_local``: maps an (n, 2) array of the GeoJSON's coordinates to local metres. ValueError for a vertex
+    that is not finite or beyond :data:`MAX_COORD_M` in local metres, a plan wider than
+    :data:`MAX_PLAN_SIZE_M`, or no walkable area.
     """
     polys = [(f.get("properties") or {}, _polygon(f["geometry"], to_local)) for f in features if f.get("geometry")
              and f["geometry"]["type"] in ("Polygon", "MultiPolygon")]
@@ -134,12 +143,37 @@ def from_features(features: list[dict], to_local, name: str = "") -> FloorPlan:
         obstacles = [g for i, (_, g) in enumerate(polys) if i != floor_i]
         area = outline = polys[floor_i][1]
     w = shapely.difference(area, shapely.union_all(obstacles)) if obstacles else area
-    return FloorPlan(shapely.make_valid(w), outline, obstacles, None, name)
+    x0, y0, x1, y1 = outline.bounds
+    if max(x1 - x0, y1 - y0) > MAX_PLAN_SIZE_M:
+        raise ValueError(f"the plan spans {x1 - x0:.6g} x {y1 - y0:.6g} m: at most {MAX_PLAN_SIZE_M:g} m on a side "
+                         "(coordinates in metres?)")
+    w = shapely.make_valid(w)
+    if not w.area > 0:
+        raise ValueError("the plan has no walkable area (its polygons are empty or degenerate)")
+    return FloorPlan(w, outline, obstacles, None, name)
+
+
+def check_vertex_count(features: list) -> None:
+    """ValueError when the Polygon and MultiPolygon geometries of a user's GeoJSON ``features`` have more
+    than :data:`MAX_PLAN_VERTICES` positions (counted before any polygon is built; other geometries are
+    ignored, as :func:`from_features` ignores them)."""
+    n = 0
+    for f in features:
+        g = f.get("geometry") if isinstance(f, dict) else None
+        if not isinstance(g, dict) or g.get("type") not in ("Polygon", "MultiPolygon"):
+            continue
+        polys = g.get("coordinates") if g["type"] == "MultiPolygon" else [g.get("coordinates")]
+        for poly in polys if isinstance(polys, list) else []:
+            for ring in poly if isinstance(poly, list) else []:
+                n += len(ring) if isinstance(ring, list) else 0
+    if n > MAX_PLAN_VERTICES:
+        raise ValueError(f"{n:,} vertices: at most {MAX_PLAN_VERTICES:,} in a floor plan")
 
 
 def from_ilc(geojson: dict, width_m: float, height_m: float, name: str = "") -> FloorPlan:
     """An MS ILC 2.0 floor: lon/lat in Web Mercator, the outline's bounding box scaled onto width × height."""
     feats = geojson["features"]
+    check_vertex_count(feats)
     outline = _polygon(feats[0]["geometry"], lambda a: a)
     b = [float(v) for v in outline.bounds]
     bbox = (b[0], b[1], b[2], b[3])
@@ -214,9 +248,21 @@ def _polygon(geom: dict, to_local) -> shapely.Geometry:
     rings = geom["coordinates"] if geom["type"] == "MultiPolygon" else [geom["coordinates"]]
     polys = []
     for poly in rings:
-        shell, *holes = [np.asarray(to_local(np.asarray(r, float)[:, :2])) for r in poly]
+        shell, *holes = [_local_ring(np.asarray(r, float)[:, :2], to_local) for r in poly]
         polys.append(shapely.Polygon(shell, holes))
     return shapely.make_valid(shapely.MultiPolygon(polys) if len(polys) > 1 else polys[0])
+
+
+def _local_ring(ring: np.ndarray, to_local) -> np.ndarray:
+    """A ring's positions in local metres; ValueError unless every one is finite and within MAX_COORD_M."""
+    if not np.isfinite(ring).all():
+        raise ValueError("a vertex is NaN or infinite")
+    xy = np.asarray(to_local(ring), float)
+    bad = ~(np.abs(xy) <= MAX_COORD_M).all(axis=1)
+    if bad.any():
+        v = ring[int(np.argmax(bad))]
+        raise ValueError(f"vertex ({v[0]:.6g}, {v[1]:.6g}) lies more than {MAX_COORD_M:g} m from the plan's origin")
+    return xy
 
 
 def _signed_distance(walkable, bounds, res: float, margin: float):
@@ -267,12 +313,13 @@ def from_user_geojson(doc: dict, name: str = "") -> FloorPlan:
     local metres when the collection says ``"frame": "local_m"``. ValueError for anything else."""
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection" or not isinstance(doc.get("features"), list):
         raise ValueError("not a GeoJSON FeatureCollection")
+    check_vertex_count(doc["features"])
     if doc.get("frame") == "local_m":
         return from_local_geojson(doc) if doc.get("georef") else from_features(doc["features"], lambda a: a, name)
     coords = np.array([c for f in doc["features"] if f.get("geometry")
                        for c in _all_coords(f["geometry"].get("coordinates", []))], float).reshape(-1, 2)
-    if not len(coords) or np.abs(coords[:, 0]).max() > 180 or np.abs(coords[:, 1]).max() > 90 \
-            or np.ptp(coords, axis=0).max() > MAX_PLAN_SPAN_DEG:
+    if not len(coords) or not np.isfinite(coords).all() or np.abs(coords[:, 0]).max() > 180 \
+            or np.abs(coords[:, 1]).max() > 90 or np.ptp(coords, axis=0).max() > MAX_PLAN_SPAN_DEG:
         raise ValueError("coordinates are not one building in WGS84 lon/lat (give \"frame\": \"local_m\" for "
                          "metres)")
     lon0, lat0 = float(coords[:, 0].min()), float(coords[:, 1].min())
@@ -293,6 +340,9 @@ FRAME_CELL_M = 1.0
 FRAME_TOLERANCE_M = 1.0
 # deg; step of the frame check's turns over the full circle
 FRAME_TURN_STEP_DEG = 5.0
+# cells; the frame check's raster of the points (cells of FRAME_CELL_M) at most: points spread wider than
+# ~1 km are not searched (no floor's fixes do; the FFT's memory grows with the raster)
+FRAME_MAX_POINT_CELLS = 1_000_000
 
 
 def frame_correction(plan: FloorPlan, xy: np.ndarray) -> dict:
@@ -302,13 +352,19 @@ def frame_correction(plan: FloorPlan, xy: np.ndarray) -> dict:
     their raster with the walkable mask, any overlap; each turn's best re-measured exactly). {"inside": share
     as given, "best_inside": share after the correction, "turn_deg", "shift_m" [dx, dy] (applied after the
     turn about their centroid), "moved_m": how far the correction moves the points, on average; no
-    correction (0) unless it fits more points than the plan as given}."""
+    correction (0) unless it fits more points than the plan as given; "searched": false when the points
+    spread too wide for the search's raster (FRAME_MAX_POINT_CELLS), which then finds no correction}."""
     xy = np.asarray(xy, float).reshape(-1, 2)
     xy = xy[np.isfinite(xy).all(axis=1)]
     inside = float(plan.inside(xy, FRAME_TOLERANCE_M).mean())
-    out: dict = {"inside": inside, "best_inside": inside, "turn_deg": 0.0, "shift_m": [0.0, 0.0], "moved_m": 0.0}
+    out: dict = {"inside": inside, "best_inside": inside, "turn_deg": 0.0, "shift_m": [0.0, 0.0], "moved_m": 0.0,
+                 "searched": True}
     grid, origin, res = plan.distance_field()
     step = max(1, int(round(FRAME_CELL_M / res)))
+    reach = 2.0 * float(np.linalg.norm(xy - xy.mean(axis=0), axis=1).max(initial=0.0)) / (step * res) + 2.0
+    if reach**2 > FRAME_MAX_POINT_CELLS:  # the points' raster under any turn would be larger
+        out["searched"] = False
+        return out
     mask = (grid[::step, ::step] <= FRAME_TOLERANCE_M).astype(float)
     cen = xy.mean(axis=0)
     for turn in np.arange(0.0, 360.0, FRAME_TURN_STEP_DEG):

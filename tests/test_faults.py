@@ -104,3 +104,26 @@ def test_a_stage_directory_is_flushed_to_disk_before_and_after_its_renames(tmp_p
     assert flushed[:-1] and all(p.startswith(new) for p in flushed[:-1])
     assert {p[len(new):] for p in flushed[:-1]} == {"/report.json", "/tum/w1.txt", "/tum", ""}
     assert flushed[-1] == str(tmp_path)  # the renames, after them
+
+
+# ------------------------------------------------------------------------------ a Dask worker killed in `build`
+@pytest.fixture(scope="module")
+def building_input(tmp_path_factory) -> Path:
+    from bench.fuzz.faults import make_building_input
+
+    return make_building_input(tmp_path_factory.mktemp("bfaults"))
+
+
+@pytest.mark.parametrize("delay_s, target", [(2.0, "worker"), (4.0, "client")])
+def test_a_killed_dask_worker_never_hangs_the_build(delay_s: float, target: str, building_input: Path,
+                                                    tmp_path: Path) -> None:
+    """A worker killed ~2 s into `build --scheduler local:2` hung the build (150 s and more), and killing the
+    command left its workers alive for ~10 s (issue 40). Now the build ends within 60 s of the kill (a floor
+    whose worker died fails, naming the floor, or the cluster that could not start says so), no process
+    outlives it, the workspace stays consistent and the next `build` completes."""
+    from bench.fuzz.faults import BUILD_EXIT_BOUND_S, build_kill
+
+    r = build_kill(building_input, tmp_path / "bws", delay_s, target)
+    assert r["problems"] == [], r
+    assert not r["hung"] and r["exit_after_kill_s"] < BUILD_EXIT_BOUND_S and r["orphans"] == 0, r
+    assert r["next_run_exit"] == 0, r

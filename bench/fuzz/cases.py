@@ -14,9 +14,12 @@ from bench.fuzz.mutate import gzip_bytes, mutate_ids, mutate_text
 REPO = Path(__file__).resolve().parents[2]
 FIXTURES = REPO / "tests" / "fixtures"
 
-#: case kind -> share of the cases of a run
-KINDS = {"schema": 0.22, "schema_parquet": 0.06, "imu": 0.08, "ilc": 0.16, "ipin": 0.12, "config": 0.2,
-         "anchors": 0.16}
+#: case kind -> share of the cases of a run (the second campaign's kinds, from "extreme" on: extreme finite
+#: values followed through the stages, floor plans and their images, gzip bombs, many distinct keys, hostile
+#: floor_info.json, venues files for `build`, outputs aimed into a workspace, planted symbolic links)
+KINDS = {"schema": 0.16, "schema_parquet": 0.05, "imu": 0.06, "ilc": 0.12, "ipin": 0.09, "config": 0.15,
+         "anchors": 0.12, "extreme": 0.06, "plan": 0.05, "gzip_bomb": 0.02, "keys": 0.02, "floor_info": 0.03,
+         "venues": 0.02, "outputs": 0.03, "links": 0.02}
 
 #: the hostile TOML values a config mutation sets
 TOML_VALUES = ["1e-300", "1e300", "-1", "0", "-4611686018427387904", "1e308", "nan", "inf", "-inf", "true", '"x"',
@@ -35,6 +38,9 @@ class Case:
     description: list[str] = field(default_factory=list)
     creates: Path | None = None    # a workspace the command would create (must not exist after a failure)
     unchanged: Path | None = None  # a workspace that must be unchanged after a failure
+    then: list[list[str]] = field(default_factory=list)  # commands run in turn while the previous ones exit 0
+    victims: list[Path] = field(default_factory=list)    # files outside the case's outputs that must never change
+    planted: list[Path] = field(default_factory=list)    # hostile entries the case planted (not leftovers)
 
 
 # ---------------------------------------------------------------------------------------------- bases
@@ -67,7 +73,36 @@ def make_bases(base: Path) -> Path:
     from rmbuild.config import SECTIONS, to_toml
 
     (base / "config.toml").write_text("\n".join(to_toml(cls(), name) for name, cls in SECTIONS.items()))
+    _second_campaign_bases(base, cli)
     return base
+
+
+def _second_campaign_bases(base: Path, cli) -> None:
+    """The bases of the second campaign's kinds: a workspace with its map, the venue's plan in local metres
+    with an image beside it, an MS ILC floor folder with its plan and floor_info.json, a venues file."""
+    import json
+
+    from PIL import Image
+
+    from rmbuild.synthetic.venue import plan_geojson
+
+    shutil.rmtree(base / "wsmap", ignore_errors=True)
+    shutil.copytree(base / "ws", base / "wsmap")
+    cli("export-map", "-w", base / "wsmap", "-q")
+    (base / "plan").mkdir(exist_ok=True)
+    venue = json.loads((base / "schema" / "truth" / "venue.json").read_text())
+    Image.fromarray(np.full((40, 60, 3), 200, np.uint8)).save(base / "plan" / "floor.png")
+    (base / "plan" / "plan.geojson").write_text(json.dumps({**plan_geojson(venue), "frame": "local_m",
+                                                            "image": {"file": "floor.png"}}))
+    floor = base / "ilcfloor" / "F1"
+    (floor / "path_data_files").mkdir(parents=True, exist_ok=True)
+    shutil.copy(FIXTURES / "msft_ilc" / "tiny_trace.txt", floor / "path_data_files" / "trace.txt")
+    ring = [[116.0, 39.0], [116.0012, 39.0], [116.0012, 39.0009], [116.0, 39.0009], [116.0, 39.0]]
+    (floor / "geojson_map.json").write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [ring]}}]}))
+    (floor / "floor_info.json").write_text(json.dumps({"map_info": {"height": 100.0, "width": 100.0}}))
+    (base / "venues.toml").write_text('[[venue]]\nname = "v1"\ninputs = ["schema"]\n\n'
+                                      '[[venue]]\nname = "v2"\ninputs = ["ilc"]\nformat = "msft-ilc"\n')
 
 
 def _trim_schema(src: Path, dst: Path, walks: int, max_t: float) -> None:
@@ -102,8 +137,10 @@ def make_case(kind: str, seed: int, base: Path, root: Path, light: bool = False)
     root.mkdir(parents=True)
     if kind == "config":
         return _config(kind, seed, base, root, rng, light)
+    from bench.fuzz import hostile
+
     return {"schema": _schema, "schema_parquet": _schema, "imu": _schema, "ilc": _trace, "ipin": _trace,
-            "anchors": _anchors}[kind](kind, seed, base, root, rng)
+            "anchors": _anchors, **hostile.KIND_MAKERS}[kind](kind, seed, base, root, rng)
 
 
 def _n_mutations(rng: np.random.Generator) -> int:

@@ -6,6 +6,7 @@ runs a few of the same."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -18,6 +19,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import psutil
 
 from rmbuild.io.lock import lock_path
 from rmbuild.io.workspace import STAGE_DIRS, Workspace
@@ -162,9 +164,140 @@ def random_kills(root: Path, stage: str, n: int, rng: np.random.Generator, sig: 
     return {"kills": n, "full_run_s": round(full, 2), **dict(out)}
 
 
+# ---------------------------------------------------------------------------------------------- build on Dask
+#: s; a build must end this soon after one of its workers is killed (or complete)
+BUILD_EXIT_BOUND_S = 60.0
+#: s; after the command ends, its processes (Dask workers, the resource tracker) must be gone this soon
+ORPHAN_GRACE_S = 3.0
+
+
+def make_building_input(root: Path) -> Path:
+    """A simulated building of two tiny floors (rmbuild's schema), for `build` on a local Dask cluster."""
+    code = ("import sys; from dataclasses import replace; from pathlib import Path\n"
+            "from rmbuild.config.simulate import preset_config\nfrom rmbuild.stages import simulate\n"
+            "cfg = preset_config('tiny', 5)\n"
+            "cfg = replace(cfg, building=replace(cfg.building, floors=2, floor_change_walks=0))\n"
+            "simulate.run(Path(sys.argv[1]), cfg)")
+    subprocess.run([sys.executable, "-c", code, str(root / "bin")], check=True, cwd=REPO, env=ENV)
+    return root / "bin"
+
+
+def build_argv(inp: Path, ws: Path, force: bool) -> list[str]:
+    return ["build", str(inp), "-w", str(ws), "--scheduler", "local:2", "-q"] + (["--force"] if force else [])
+
+
+def _workers(proc: psutil.Process) -> list[psutil.Process]:
+    """The Dask worker processes under ``proc`` (spawned by its nannies)."""
+    out = []
+    for c in proc.children(recursive=True):
+        try:
+            if "spawn_main" in " ".join(c.cmdline()):
+                out.append(c)
+        except psutil.Error:
+            pass
+    return out
+
+
+def build_consistent(ws: Path) -> list[str]:
+    """Problems of a building workspace after a fault: a floor stage whose files do not match its record, a
+    temporary or backup directory left (after a run that opened it: recovery happens under the lock)."""
+    from rmbuild.io.workspace import building_floors
+
+    out = []
+    for name, p in (building_floors(ws) or {}).items():
+        w = Workspace.open(p)
+        for s in STAGE_DIRS:
+            if w.record(s) is not None and w.verify(s):
+                out.append(f"{name}/{s}: {w.verify(s)[:2]}")
+        out += [f"{name}: left {q.name}" for q in p.glob(".*") if ".new-" in q.name or ".old-" in q.name]
+    return out
+
+
+def build_kill(inp: Path, ws: Path, delay_s: float, target: str) -> dict:
+    """Run `build --scheduler local:2 --force`, and after ``delay_s`` kill -9 one of its Dask workers
+    (``target`` "worker", a random one of those up) or the command itself ("client"). Returns what happened:
+    exit code, s from the kill to the exit, the error lines, processes left ``ORPHAN_GRACE_S`` after the exit,
+    whether the workspace is consistent, and whether the next `build` (without --force) completes."""
+    proc = subprocess.Popen([sys.executable, "-m", "rmbuild", *build_argv(inp, ws, True)], cwd=REPO, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    me = psutil.Process(proc.pid)
+    time.sleep(delay_s)
+    try:
+        family = me.children(recursive=True)
+    except psutil.Error:
+        family = []
+    victim = None
+    if proc.poll() is None:
+        if target == "client":
+            victim = proc.pid
+        else:
+            workers = _workers(me)
+            victim = workers[int(time.monotonic_ns() % len(workers))].pid if workers else None
+    t_kill = time.perf_counter()
+    if victim is not None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(victim, signal.SIGKILL)
+    try:
+        out, err = proc.communicate(timeout=BUILD_EXIT_BOUND_S + 90)
+        hung = False
+    except subprocess.TimeoutExpired:
+        hung = True
+        for q in [me, *family]:
+            with contextlib.suppress(psutil.Error):
+                q.kill()
+        out, err = proc.communicate()
+    exit_s = time.perf_counter() - t_kill
+    time.sleep(ORPHAN_GRACE_S)
+    left = [q.pid for q in family if q.is_running() and q.status() != psutil.STATUS_ZOMBIE]
+    errors = [ln for ln in err.splitlines() if ln.strip()]
+    res = {"delay_s": round(delay_s, 2), "target": target if victim is not None else "none (already done)",
+           "exit": proc.returncode, "exit_after_kill_s": round(exit_s, 2), "hung": hung, "orphans": len(left),
+           "stderr_lines": len(errors), "error": errors[-1][:300] if errors else ""}
+    problems = []
+    late = victim is not None and exit_s > BUILD_EXIT_BOUND_S
+    if hung or late or proc.returncode not in (0, 1, 2, -signal.SIGKILL):
+        problems.append("hang or late exit")
+    if left:
+        problems.append(f"{len(left)} process(es) left")
+    if target == "worker" and proc.returncode not in (0, -signal.SIGKILL) and (
+            sum(ln.startswith("error: ") for ln in errors) != 1 or not errors[-1].startswith("error: ")):
+        problems.append("not one error line")  # (warnings may come before it)
+    if "Traceback" in err or "internal error" in err:
+        problems.append("internal error")
+    nxt = rmbuild(build_argv(inp, ws, not (ws / "build_state.json").is_file()))
+    res["next_run_exit"] = nxt.returncode
+    if nxt.returncode != 0:
+        problems.append(f"next run exit {nxt.returncode}: {nxt.stderr.strip()[-200:]}")
+    else:
+        bad = build_consistent(ws)
+        if bad:
+            problems.append(f"inconsistent: {bad[:2]}")
+    res["problems"] = problems
+    return res
+
+
+def build_kills(root: Path, n: int, rng: np.random.Generator, target: str = "worker") -> dict:
+    """``n`` builds with a worker (or the client) killed at a uniformly random time within a full run."""
+    inp = make_building_input(root)
+    ws = root / "bws"
+    t0 = time.perf_counter()
+    full = rmbuild(build_argv(inp, ws, True))
+    assert full.returncode == 0, full.stderr
+    full_s = time.perf_counter() - t0
+    runs = [build_kill(inp, ws, float(d), target) for d in rng.uniform(0.3, full_s, n)]
+    exits = [r["exit_after_kill_s"] for r in runs if r["target"] == target]
+    return {"kills": n, "full_run_s": round(full_s, 2), "failures": sum(bool(r["problems"]) for r in runs),
+            "exit": dict(Counter(str(r["exit"]) for r in runs)),
+            "max_exit_after_kill_s": max(exits, default=None), "orphans": sum(r["orphans"] for r in runs),
+            "next_run_ok": sum(r["next_run_exit"] == 0 for r in runs), "runs": runs}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(prog="python -m bench.fuzz.faults", description=__doc__)
     ap.add_argument("--kills", type=int, default=40, help="random kills per stage")
+    ap.add_argument("--build-kills", type=int, default=20,
+                    help="builds on a local Dask cluster with a worker killed at a random time (and as many with "
+                         "the command itself killed)")
     ap.add_argument("--out", type=Path, default=Path("bench/results/faults.json"))
     args = ap.parse_args()
     rng = np.random.default_rng(24)
@@ -187,10 +320,16 @@ def main() -> None:
                 nxt = rmbuild(argv(stage, root)).returncode
                 res["commit_points"][f"{stage}/{point}"] = {"exit": code, "state": state, "next_run_exit": nxt}
             print(stage, res["random_sigkill"][stage], res["sigint"][stage], file=sys.stderr, flush=True)
+        for target in ("worker", "client"):
+            part = build_kills(Path(tmp) / f"build_{target}", args.build_kills, rng, target)
+            res[f"build_{target}_kill"] = part
+            print(f"build, {target} killed:", {k: v for k, v in part.items() if k != "runs"}, file=sys.stderr,
+                  flush=True)
     bad = sum(v.get("inconsistent", 0) + v.get("unexpected exit", 0) + v.get("traceback", 0) + v.get("lock left", 0)
               + (1 - v["next run ok"])
               for part in ("random_sigkill", "sigint") for v in res[part].values())
     bad += sum(v["state"] not in ("old", "new") or v["next_run_exit"] != 0 for v in res["commit_points"].values())
+    bad += sum(res[f"build_{t}_kill"]["failures"] for t in ("worker", "client"))
     res["failures"] = bad
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(res, indent=1) + "\n")

@@ -47,7 +47,7 @@ def _digest(root: Path) -> str:
     h = hashlib.sha256()
     for p in sorted(root.rglob("*")):
         h.update(str(p.relative_to(root)).encode())
-        if p.is_file():
+        if p.is_file() and not p.is_symlink():
             h.update(p.read_bytes())
     return h.hexdigest()
 
@@ -66,18 +66,20 @@ def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float, ligh
     shutil.rmtree(root, ignore_errors=True)
     case = make_case(kind, seed, base, root, light)
     before = _digest(case.unchanged) if case.unchanged is not None else None
+    victims = {v: _file_digest(v) for v in case.victims}
     out, err = io.StringIO(), io.StringIO()
     rss_before = _status_kb("VmRSS") / 1024
     _reset_peak()
     t0 = time.perf_counter()
-    code: int | str
+    code: int | str = 0
+    first_code: int | str | None = None
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            main(case.argv)
-        code = 0
-    except SystemExit as e:
-        code = int(e.code or 0) if not isinstance(e.code, str) else 1
+        for argv in [case.argv, *case.then]:  # a chain goes on while its commands succeed
+            code = _run_cli(main, argv, out, err)
+            first_code = code if first_code is None else first_code
+            if code != 0:
+                break
     except CaseTimeout:
         code = "timeout"
     except MemoryError:
@@ -86,12 +88,32 @@ def run_one(kind: str, seed: int, base: Path, work: Path, timeout_s: float, ligh
         signal.setitimer(signal.ITIMER_REAL, 0)
     elapsed = time.perf_counter() - t0
     result = {"kind": kind, "seed": seed, "argv": case.argv, "mutations": case.description, "code": code,
-              "stderr": err.getvalue(), "time_s": round(elapsed, 3),
+              "first_code": first_code, "stderr": err.getvalue(), "time_s": round(elapsed, 3),
               "peak_rss_mb": round(_status_kb("VmHWM") / 1024, 1), "rss_before_mb": round(rss_before, 1)}
     result["problems"] = problems(case, result, before)
+    changed = [str(v) for v, d in victims.items() if _file_digest(v) != d]
+    if changed:
+        result["problems"].append(f"wrote through a link: {changed[:2]}")
     result["stderr"] = result["stderr"][-3000:]
     shutil.rmtree(root, ignore_errors=True)
     return result
+
+
+def _run_cli(main, argv: list[str], out: io.StringIO, err: io.StringIO) -> int:
+    """One command of a case: its exit code (the CLI's SystemExit)."""
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            main(argv)
+        return 0
+    except SystemExit as e:
+        return int(e.code or 0) if not isinstance(e.code, str) else 1
+
+
+def _file_digest(p: Path) -> str | None:
+    try:
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def problems(case: object, r: dict, before: str | None) -> list[str]:
@@ -112,13 +134,15 @@ def problems(case: object, r: dict, before: str | None) -> list[str]:
         elif str(case.root) not in errors[0] and "command-line option" not in errors[0]:  # type: ignore[attr-defined]
             out.append("error names no file of the case")
     if code != 0:
-        if case.creates is not None and case.creates.exists():  # type: ignore[attr-defined]
+        # a chain's later command may fail after its first one created the workspace
+        if case.creates is not None and case.creates.exists() and r.get("first_code", code) != 0:  # type: ignore[attr-defined]
             out.append("failed but wrote its output")
         if before is not None and _digest(case.unchanged) != before:  # type: ignore[attr-defined]
             out.append("failed but changed the workspace")
     if r["peak_rss_mb"] is not None and r["peak_rss_mb"] > PEAK_LIMIT_MB:
         out.append(f"peak memory {r['peak_rss_mb']:.0f} MB")
-    left = _leftovers(case.root)  # type: ignore[attr-defined]
+    planted = {str(p.relative_to(case.root)) for p in case.planted}  # type: ignore[attr-defined]
+    left = [p for p in _leftovers(case.root) if p not in planted]  # type: ignore[attr-defined]
     if left:
         out.append(f"left {left[:3]}")
     return out

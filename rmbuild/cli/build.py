@@ -54,8 +54,8 @@ def build(inputs, workspace, venues_path, out_dir, fmt, floorplan, scheduler, co
         if not quiet:
             _summary(r, workspace)
     if r["failed"]:
-        raise stage.FloorsFailedError(f"{len(r['failed'])} failed: {', '.join(r['failed'])} (the others are "
-                                      "complete)")
+        causes = "; ".join(f"{name}: {why}" for name, why in r["failed"].items())
+        raise stage.FloorsFailedError(f"{len(r['failed'])} failed ({causes}); the others are complete")
 
 
 def _check_usage(inputs, workspace, venues_path, out_dir, fmt, floorplan) -> None:

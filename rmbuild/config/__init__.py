@@ -70,13 +70,17 @@ def load_stage_config(
     tables merge key by key), then ``overrides`` (command-line options; None values are ignored).
 
     Raises :class:`ConfigError` naming the file, the line (when the value is set on a line of its own) and
-    the key for an unknown section in the file, an unknown key or a bad value.
+    the key for an unknown section in the file, an unknown key or a bad value — in any of the file's tables,
+    not only ``[section]``: a file is checked whole, whichever stage reads it.
     """
     text = None
     if path is not None:
         p = Path(path)
-        load_toml(p)  # size, encoding and syntax errors, with their line
+        doc = load_toml(p)  # size, encoding and syntax errors, with their line
         text = p.read_text(encoding="utf-8")
+        for other in doc:
+            if other != section and other in SECTIONS:  # an unknown section: the error of _resolve below
+                _resolve(other, text, str(path), None, None)
     return _resolve(section, text, str(path) if path is not None else None, overrides, base)
 
 

@@ -19,6 +19,7 @@ from rmbuild.errors import InputError
 from rmbuild.geometry import wrap
 from rmbuild.ingest.checks import scan_ids, walk_time_ordered
 from rmbuild.io.formats.base import RawImu, RawInput
+from rmbuild.limits import MAX_APS, MAX_COORD_M, MAX_FINGERPRINT_CELLS, MAX_WALK_PATH_M, MAX_WALK_POSES
 from rmbuild.pdr import ImuTimeError, PdrReport, run_pdr
 from rmbuild.types import (
     BLE_COLUMNS,
@@ -155,13 +156,18 @@ def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd
         v = poses[c].to_numpy(dtype=np.float64)
         if not np.isfinite(v).all():
             raise InputError(f"poses: {c} is NaN or infinite", wp(_first(~np.isfinite(v))))
+    _check_positions(poses, wp, "poses")
     pose_codes, pose_walk_ids = _check_time_order(poses, wp, strict=True, what="poses")
+    _check_walk_size(poses, pose_codes, pose_walk_ids, wp)
 
     pose_walks = set(pose_walk_ids)
     codes = {"poses": (pose_codes, pose_walk_ids), "wifi": _check_readings(wifi, ww, cfg, "wifi", pose_walks)}
     if raw.ble is not None and len(raw.ble):
         codes["ble"] = _check_readings(raw.ble, _where(raw, "ble"), cfg, "ble", pose_walks)
+    if raw.truth_poses is not None and len(raw.truth_poses):
+        _check_positions(raw.truth_poses, _where(raw, "truth/poses"), "truth poses")
     if len(fixes):
+        _check_positions(fixes, wf, "fixes")
         orphan = ~fixes["walk_id"].isin(pose_walks).to_numpy()
         if orphan.any():
             i = _first(orphan)
@@ -180,6 +186,56 @@ def validate(raw: RawInput, cfg: IngestConfig) -> dict[str, tuple[np.ndarray, pd
         raise InputError(f"walk {_v(wid)} has poses but no row in the walks table",
                          wp(_first((poses["walk_id"] == wid).to_numpy())))
     return codes
+
+
+def _check_positions(df: pd.DataFrame, where: Callable[[int], str], what: str) -> None:
+    """x_m and y_m within :data:`MAX_COORD_M` of the origin (a position beyond it is no position)."""
+    for c in ("x_m", "y_m"):
+        v = np.abs(df[c].to_numpy(dtype=np.float64))
+        far = ~(v <= MAX_COORD_M)  # NaN too
+        if far.any():
+            i = _first(far)
+            raise InputError(f"{what}: {c} {float(df[c].iloc[i]):.10g} is more than {MAX_COORD_M:g} m from the origin "
+                             "(the limit of a position)", where(i))
+
+
+def _check_walk_size(poses: pd.DataFrame, codes: np.ndarray, walk_ids: pd.Index, where: Callable[[int], str]) -> None:
+    """At most :data:`MAX_WALK_POSES` poses and :data:`MAX_WALK_PATH_M` of path (the sum of the steps) in
+    each walk; the error names the first pose beyond the limit."""
+    n = np.bincount(codes, minlength=len(walk_ids))
+    if (n > MAX_WALK_POSES).any():
+        w = int(np.argmax(n > MAX_WALK_POSES))
+        row = int(np.flatnonzero(codes == w)[MAX_WALK_POSES])
+        raise InputError(f"walk {_v(walk_ids[w])} has {int(n[w]):,} poses: at most {MAX_WALK_POSES:,} in one walk "
+                         "(split it into several walks)", where(row))
+    order = np.argsort(codes, kind="stable")
+    c = codes[order]
+    x, y = (poses[k].to_numpy(np.float64)[order] for k in ("x_m", "y_m"))
+    step = np.hypot(np.diff(x), np.diff(y))
+    step[c[1:] != c[:-1]] = 0.0
+    path = np.r_[0.0, np.cumsum(step)]
+    path -= path[np.searchsorted(c, c)]  # metres walked within the row's walk up to the row
+    if (path > MAX_WALK_PATH_M).any():
+        k = _first(path > MAX_WALK_PATH_M)
+        raise InputError(f"walk {_v(walk_ids[c[k]])}: its steps add up to more than {MAX_WALK_PATH_M:g} m by this "
+                         "pose (the limit of one walk's path; are the positions in metres?)", where(int(order[k])))
+
+
+def _check_fingerprint_size(readings: pd.DataFrame, where: Callable[[int], str], label: str, keys: str) -> None:
+    """The dense per-node table of ``readings`` (attached ones: nodes × distinct keys) has at most
+    :data:`MAX_FINGERPRINT_CELLS` cells; checked before it is allocated."""
+    if not len(readings):
+        return
+    n_nodes = int(pd.unique(readings["node"]).size)
+    n_keys = int(readings["bssid"].nunique())
+    if n_keys > MAX_APS:
+        raise InputError(f"{n_keys:,} distinct {keys} in the {label} readings of one floor: at most {MAX_APS:,} (the "
+                         f"optimizer compares scans over every one of them; drop {keys} heard only once or twice, "
+                         "e.g. phones' hotspots)", where(0).rsplit(":", 1)[0])
+    if n_nodes * n_keys > MAX_FINGERPRINT_CELLS:
+        raise InputError(f"{n_nodes:,} poses with {label} readings of {n_keys:,} distinct {keys}: a fingerprint table "
+                         f"of {n_nodes * n_keys:,} cells, at most {MAX_FINGERPRINT_CELLS:,} (split the input, or "
+                         f"drop {keys} heard only once or twice)", where(0).rsplit(":", 1)[0])
 
 
 def _first_repeated_reading(wifi: pd.DataFrame, walk_codes: np.ndarray) -> int:
@@ -434,6 +490,9 @@ def build_dataset(raw: RawInput, cfg: IngestConfig, source: str = "", pdr_cfg: P
         walks=walks, poses=poses, wifi=wifi, fixes=fixes, truth_poses=truth, truth_aps=raw.truth_aps,
         venue=raw.venue, extra={"truth": dict(raw.truth_extra)}, ble=ble,
     )
+    _check_fingerprint_size(wifi, _where(raw, "wifi"), "Wi-Fi", "BSSIDs")
+    if ble is not None:
+        _check_fingerprint_size(ble, _where(raw, "ble"), "BLE", "beacons")
     fp = Fingerprints.from_readings(wifi)
     scan = scan_ids(wifi_walk, wifi["t_s"].to_numpy(np.float64))
     scans = int(scan.max()) + 1 if len(scan) else 0

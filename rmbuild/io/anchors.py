@@ -17,11 +17,12 @@ import pandas as pd
 
 from rmbuild.errors import InputError
 from rmbuild.io.formats.rmbuild_schema import check_columns, coerce, read_located
+from rmbuild.limits import MAX_ANCHORS, MAX_COORD_M
 from rmbuild.types import Dataset
 
 ANCHOR_SCHEMA = {"walk_id": "str", "t_s": "num", "x_m": "num", "y_m": "num"}
-#: m; |x| or |y| beyond this is no building-frame position (100 km: larger than any campus)
-MAX_ANCHOR_COORD_M = 1e5
+#: m; |x| or |y| beyond this is no building-frame position (the limit of every position)
+MAX_ANCHOR_COORD_M = MAX_COORD_M
 #: m; allowance for the anchors' own position error when two anchors of one walk are compared
 ANCHOR_SLACK_M = 5.0
 #: 1; allowance on the walked distance between two anchors (PDR step lengths err by well under 50 %)
@@ -46,6 +47,9 @@ def read_anchors(path: str | Path) -> Anchors:
         raise InputError("anchors file not found", str(p))
     loc = read_located(p, ANCHOR_SCHEMA, {"label": "str"})
     check_columns(loc, ANCHOR_SCHEMA, {"label": "str"})
+    if len(loc.df) > MAX_ANCHORS:
+        raise InputError(f"{len(loc.df):,} anchors: at most {MAX_ANCHORS:,} in one file (known positions are "
+                         "landmarks, not a track)", loc.where(MAX_ANCHORS))
     coerce(loc, {**ANCHOR_SCHEMA, "label": "str"})
     df = loc.df[list(ANCHOR_SCHEMA)].reset_index(drop=True)
     xy = df[["x_m", "y_m"]].to_numpy(float)

@@ -11,6 +11,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from rmbuild.errors import WorkspaceError
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -97,9 +99,11 @@ def replacing_dir(target: Path) -> Iterator[Path]:
 
     The swap is two renames (old -> backup, new -> target) followed by deleting the backup; if the
     process dies between them, :func:`recover_dir` puts the backup back. On an exception the temporary
-    directory is removed and ``target`` is untouched.
+    directory is removed and ``target`` is untouched. A ``target`` that is a symbolic link is refused
+    (:class:`LinkError`): the directories rmbuild replaces are its own, never reached through a link.
     """
     target = Path(target)
+    refuse_link(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
     os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; the result should look like any new directory
@@ -140,15 +144,32 @@ def _fsync_path(path: Path) -> None:
 
 
 def recover_dir(target: Path) -> None:
-    """Undo a swap interrupted between its two renames; drop leftovers of interrupted writes."""
+    """Undo a swap interrupted between its two renames; drop leftovers of interrupted writes (a symbolic
+    link named like one is not rmbuild's: it is removed, never followed or put in place)."""
     target = Path(target)
     parent = target.parent
     if not parent.exists():
         return
     for p in parent.glob(f".{target.name}.old-*"):
-        if not target.exists():
+        if p.is_symlink():
+            p.unlink()
+        elif not target.exists() and not target.is_symlink():
             os.replace(p, target)
         else:
             shutil.rmtree(p, ignore_errors=True)
     for p in parent.glob(f".{target.name}.new-*"):
-        shutil.rmtree(p, ignore_errors=True)
+        if p.is_symlink():
+            p.unlink()
+        else:
+            shutil.rmtree(p, ignore_errors=True)
+
+
+class LinkError(WorkspaceError):
+    """A path rmbuild would write (a stage directory, a workspace file, an output) is a symbolic link."""
+
+
+def refuse_link(path: Path) -> None:
+    """Raise :class:`LinkError` when ``path`` itself is a symbolic link."""
+    if Path(path).is_symlink():
+        raise LinkError(f"{path} is a symbolic link: rmbuild never writes through one; remove it (or give the "
+                        "path it points to)")

@@ -8,7 +8,6 @@ frame of the data's fixes (ingest reports it, optimize does not use a plan that 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +15,9 @@ import numpy as np
 from rmbuild.errors import InputError
 from rmbuild.floorplan import frame_correction, from_local_geojson, from_user_geojson, image_extent_m, to_geojson
 from rmbuild.io.floor_image import attach_image, check_extent, read_image
+from rmbuild.io.jsonfile import read_json_file
+from rmbuild.limits import MAX_PLAN_BYTES
 
-#: bytes; a larger plan file is refused (a detailed mall floor is a few MB)
-MAX_PLAN_BYTES = 64 * 1024 * 1024
 #: share of the data's fixes that must lie within 1 m of walkable space, else the plan is taken to be in
 #: another frame. Measured on the five MS ILC 2.0 floors: the right plan 100 % on each; shifted 5-30 m,
 #: turned 5-180 deg, mirrored or another floor's of the same site 0-83 % (site2/F6's fixes on F4's plan)
@@ -47,16 +46,19 @@ def read_user_plan(path: str | Path) -> dict:
 
 
 def _read_doc(p: Path) -> dict:
-    if p.stat().st_size > MAX_PLAN_BYTES:
-        raise InputError(f"floor plan larger than {MAX_PLAN_BYTES // 2**20} MB", str(p))
-    return json.loads(p.read_bytes())
+    doc = read_json_file(p, MAX_PLAN_BYTES, "floor plan")
+    if not isinstance(doc, dict):
+        raise InputError("not a GeoJSON FeatureCollection (a JSON object)", str(p))
+    return doc
 
 
 def plan_image(doc: dict, path: Path) -> tuple[Path, tuple[float, float, float, float] | None] | None:
     """The raster image a user's plan names in its ``"image"`` member, ``{"file": PATH (relative to the
-    plan's folder), "extent": [x0, y0, x1, y1] (optional; the plan's coordinates, as
+    plan's folder, and in it), "extent": [x0, y0, x1, y1] (optional; the plan's coordinates, as
     :func:`rmbuild.floorplan.image_extent_m` takes them)}``: (its path, the extent or None); None without
-    the member; InputError naming the plan file when the member is malformed."""
+    the member; InputError naming the plan file when the member is malformed or names a file outside the
+    plan's folder (an absolute path, ``..``, a link leading out): a file never makes rmbuild read another
+    file elsewhere."""
     img = doc.get("image") if isinstance(doc, dict) else None
     if img is None:
         return None
@@ -70,7 +72,12 @@ def plan_image(doc: dict, path: Path) -> tuple[Path, tuple[float, float, float, 
         e = check_extent(extent, str(path))
         extent = (e[0], e[1], e[2], e[3])
     f = Path(img["file"])
-    return (f if f.is_absolute() else path.parent / f), extent
+    folder = path.parent.resolve()
+    target = (folder / f).resolve()
+    if f.is_absolute() or folder not in target.parents:
+        raise InputError(f'"image" "file" {img["file"][:200]!r} lies outside the plan\'s folder: give a file in '
+                         "that folder (or the image with --floorplan-image)", str(path))
+    return path.parent / f, extent
 
 
 def plan_image_file(path: str | Path) -> Path | None:
@@ -102,7 +109,9 @@ def check_plan_frame(doc: dict, fixes_xy: np.ndarray) -> dict | None:
                          "moved_m": round(c["moved_m"], 2), "fixes_inside": round(c["best_inside"], 3)}
     label = doc.get("source") or doc.get("name") or "(unnamed)"
     head = f"floor plan {label}: only {share:.0%} of the {len(xy)} fixes lie in its walkable space (1 m)"
-    if c["best_inside"] >= MIN_FIXES_INSIDE:
+    if not c["searched"]:
+        out["warning"] = f"{head}, and they spread too wide to search for a shift or turn that fits them"
+    elif c["best_inside"] >= MIN_FIXES_INSIDE:
         dx, dy = c["shift_m"]
         move = (f"moved by ({dx:+.0f}, {dy:+.0f}) m" if c["turn_deg"] == 0 else
                 f"turned {c['turn_deg']:+.0f} deg about their centre and shifted ({c['moved_m']:.0f} m on average)")

@@ -7,6 +7,14 @@ construction and the next command simply takes it. A writer records its pid, hos
 time in the file, so that a second command can say who holds the workspace.
 
 Locks are re-entrant within a process (a stage calling another stage's code on the same workspace).
+
+A building's floors are locked with their building: a command on one floor (``-w B/floors/F1``) holds the
+building's lock shared and the floor's own lock exclusively (or shared, to read), so that it excludes a
+command that rewrites the whole building (``ingest --force``, a stage over every floor: the building's lock
+exclusive), and the other way round, while commands on different floors run side by side.
+
+The lock file is opened with ``O_NOFOLLOW`` and must be a regular file: a symbolic link planted in its
+place is refused, never written through.
 """
 
 from __future__ import annotations
@@ -18,12 +26,14 @@ import json
 import logging
 import os
 import socket
+import stat
 import time
 from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 
-from rmbuild.errors import WorkspaceBusyError, WorkspaceError
+from rmbuild.errors import RmbuildError, WorkspaceBusyError, WorkspaceError
+from rmbuild.io.layout import FLOORS_DIR, building_floors
 
 log = logging.getLogger(__name__)
 
@@ -45,10 +55,57 @@ def holds_lock(root: str | Path, exclusive: bool = True) -> bool:
 
 @contextlib.contextmanager
 def workspace_lock(root: str | Path, command: str, exclusive: bool = True) -> Iterator[None]:
-    """Hold the workspace's lock for the block: exclusive for commands that write, shared for readers.
+    """Hold the workspace's lock for the block: exclusive for commands that write, shared for readers; a
+    floor of a building holds its building's lock shared as well (module docstring).
 
     Raises :class:`WorkspaceBusyError` at once (no waiting) when another process holds it.
     """
+    building = _building_of(Path(root))
+    if building is None:
+        with _lock(root, command, exclusive):
+            yield
+        return
+    with _lock(building, command, exclusive=False), _lock(root, command, exclusive):
+        yield
+
+
+def _building_of(root: Path) -> Path | None:
+    """The building whose floor ``root`` is (its manifest lists it), None for any other workspace."""
+    r = root.resolve()
+    if r.parent.name != FLOORS_DIR:
+        return None
+    try:
+        floors = building_floors(r.parent.parent) or {}
+    except RmbuildError:
+        return None
+    return r.parent.parent if any(p.resolve() == r for p in floors.values()) else None
+
+
+@contextlib.contextmanager
+def shared_while(root: str | Path) -> Iterator[None]:
+    """For the block, turn this process's exclusive lock of ``root`` into a shared one, so that other
+    processes may work on its floors (`build`'s floor tasks on Dask workers); exclusive again afterwards
+    when nobody else holds it then (else it stays shared until released). No-op without an exclusive lock."""
+    key = Path(root).resolve()
+    held = _HELD.get(key)
+    if held is None or not held[1]:
+        yield
+        return
+    fcntl.flock(held[0], fcntl.LOCK_SH)
+    _HELD[key] = (held[0], False, held[2])
+    try:
+        yield
+    finally:
+        fd, _, depth = _HELD[key]
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            _HELD[key] = (fd, True, depth)
+        except BlockingIOError:
+            pass
+
+
+@contextlib.contextmanager
+def _lock(root: str | Path, command: str, exclusive: bool) -> Iterator[None]:
     key = Path(root).resolve()
     held = _HELD.get(key)
     if held is not None:
@@ -72,8 +129,8 @@ def workspace_lock(root: str | Path, command: str, exclusive: bool = True) -> It
     try:
         yield
     finally:
-        del _HELD[key]
-        _release(key, fd, exclusive)
+        still_exclusive = _HELD.pop(key)[1]
+        _release(key, fd, still_exclusive)
 
 
 class _NoLockFile(Exception):
@@ -86,11 +143,17 @@ def _acquire(root: Path, command: str, exclusive: bool) -> int:
         raise WorkspaceError(f"{path.parent}: no such directory (the workspace's parent)")
     while True:
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
         except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise WorkspaceError(f"{path}: the workspace lock is a symbolic link; rmbuild never writes through "
+                                     "one: remove it") from None
             if not exclusive and e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
                 raise _NoLockFile() from None
             raise WorkspaceError(f"{path}: cannot create the workspace lock ({e.strerror})") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise WorkspaceError(f"{path}: the workspace lock is not a regular file; remove it")
         try:
             fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -119,10 +182,19 @@ def _acquire(root: Path, command: str, exclusive: bool) -> int:
 
 
 def _release(root: Path, fd: int, exclusive: bool) -> None:
+    """Unlink the lock file while still holding it exclusively (a shared holder first tries to become the
+    only one), so that nobody locks a file about to vanish and no lock file is left behind."""
     try:
-        if exclusive:  # unlink while still holding it, so nobody locks a file that is about to vanish
+        if not exclusive:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                exclusive = True
+            except BlockingIOError:  # others hold it: the last one out removes it
+                pass
+        if exclusive:
             with contextlib.suppress(FileNotFoundError):
-                os.unlink(lock_path(root))
+                if os.stat(lock_path(root)).st_ino == os.fstat(fd).st_ino:
+                    os.unlink(lock_path(root))
     finally:
         os.close(fd)
 
@@ -131,7 +203,7 @@ def _info(fd: int) -> dict:
     """What the last writer recorded in the lock file ({} when nothing readable)."""
     try:
         info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return {}
     return info if isinstance(info, dict) else {}
 
@@ -150,8 +222,9 @@ def _holder(fd: int) -> str:
         info = _info(fd)
     pid, host = info.get("pid"), info.get("host")
     if not isinstance(pid, int) or (host == socket.gethostname() and not _alive(pid)):
-        # no writer recorded (or the recorded one is gone): the holders are readers (view, report)
-        return "another rmbuild command is reading it"
+        # no writer recorded (or the recorded one is gone): the holders share it (view, report, a command on
+        # one of a building's floors)
+        return "another rmbuild command holds it shared (reading it, or working on one of its floors)"
     return f"`rmbuild {info.get('command', '?')}` (pid {pid} on {host}, since {info.get('since_utc', '?')}) holds it"
 
 

@@ -92,6 +92,9 @@ def _existing(base: Path, value: object, name: str, key: str, where: str) -> Pat
     p = Path(value) if Path(value).is_absolute() else base / value
     if not p.exists():
         raise ConfigError(f"venue {name!r}: {key}: {p} does not exist", where)
+    if not (p.is_file() or (key == "inputs" and p.is_dir())):
+        what = "a regular file or directory" if key == "inputs" else "a regular file"
+        raise ConfigError(f"venue {name!r}: {key}: {p} is not {what}", where)
     return p
 
 

@@ -52,20 +52,18 @@ import pandas as pd
 
 from rmbuild import __version__
 from rmbuild.errors import InputError, WorkspaceError
-from rmbuild.io.atomic import clean_json, recover_dir, replacing_dir, write_json_atomic
+from rmbuild.io.atomic import clean_json, recover_dir, refuse_link, replacing_dir, write_json_atomic
+from rmbuild.io.layout import FLOORS_DIR, MANIFEST, MAX_MARKER_BYTES, WORKSPACE_FORMAT, building_floors
+from rmbuild.io.layout import is_marker as _is_marker
+from rmbuild.io.layout import read_marker as _read_marker
 from rmbuild.io.lock import holds_lock, workspace_lock
 from rmbuild.types import WIFI_COLUMNS, Dataset, Fingerprints
 
 #: version of this layout; 1 kept the stage reports and checksums outside the stage directories
 SCHEMA_VERSION = 2
-#: the marker's "format": a manifest.json without it is not an rmbuild workspace
-WORKSPACE_FORMAT = "rmbuild-workspace"
-MANIFEST = "manifest.json"
 RECORD = "stage.json"
 REPORT = "report.json"
 CONFIG = "config.toml"
-#: a marker or record larger than this is not one of ours (never read a huge file to find out)
-MAX_MARKER_BYTES = 1 << 20
 #: bytes; a Parquet column's dictionary beyond this falls back to plain encoding. pyarrow's 1 MB default
 #: builds and then drops large dictionaries of continuous columns (times, coordinates): 16 KB wrote the
 #: ingest tables ~1.5x faster, and smaller (bench/bench_ingest.py)
@@ -153,8 +151,7 @@ for _stage, _dir in STAGE_DIRS.items():
     ARTEFACTS[f"{_dir}.config"] = f"{_dir}/{CONFIG}"
     ARTEFACTS[f"{_stage}.rrd"] = f"{_stage}.rrd"
 
-#: the floors' workspaces, and the building-level reports, relative to a building workspace's root
-FLOORS_DIR = "floors"
+#: the building-level reports, relative to a building workspace's root (its floors: FLOORS_DIR)
 BUILDING_DIR = "building"
 
 #: walk ids become file names (optimize/tum/<name>.txt): at most this many characters before the suffix
@@ -295,9 +292,10 @@ class Workspace:
         """Create (or with ``force`` replace) a workspace holding the ingest stage, atomically.
 
         Refuses to replace an existing non-empty directory without ``force``, and never replaces a
-        directory that is not an rmbuild workspace (one whose manifest.json is rmbuild's marker).
+        directory that is not an rmbuild workspace (one whose manifest.json is rmbuild's marker). A ``root``
+        that is a symbolic link stands for the directory it points to, which is replaced (the link stays).
         """
-        root = Path(root)
+        root = _resolved_root(root)
         with workspace_lock(root, "ingest"):
             recover_dir(root)
             check_replaceable(root, force)
@@ -315,7 +313,7 @@ class Workspace:
                         force: bool = False) -> Iterator[dict[str, StageWriter]]:
         """Create (or with ``force`` replace) a building workspace, atomically: one ingest writer per floor
         (``floors``: name -> level, None when unknown), each floor a whole workspace under ``floors/``."""
-        root = Path(root)
+        root = _resolved_root(root)
         dirs = walk_file_names(floors)
         with workspace_lock(root, "ingest"):
             recover_dir(root)
@@ -544,23 +542,6 @@ class Workspace:
         return Fingerprints.from_long(self.read_table("data.fingerprints"))
 
 
-def building_floors(root: str | Path) -> dict[str, Path] | None:
-    """floor name -> the floor's workspace directory, for a building workspace; None for a single floor
-    (or no workspace at all: opening it reports that)."""
-    root = Path(root)
-    m = _read_marker(root)
-    if not _is_marker(m) or not isinstance((m or {}).get("floors"), list):
-        return None
-    out: dict[str, Path] = {}
-    for f in (m or {})["floors"]:
-        if not (isinstance(f, dict) and isinstance(f.get("name"), str) and isinstance(f.get("dir"), str)
-                and f["dir"].startswith(FLOORS_DIR + "/") and "/" not in f["dir"][len(FLOORS_DIR) + 1:]
-                and f["dir"][len(FLOORS_DIR) + 1:] not in ("", ".", "..")):
-            raise WorkspaceError(f"{root / MANIFEST}: malformed floor entry {str(f)[:120]}")
-        out[f["name"]] = root / f["dir"]
-    return out
-
-
 def floor_levels(root: str | Path) -> dict[str, int | None]:
     """floor name -> level (0 ground floor, -1 the first basement; None unknown) of a building workspace."""
     m = _read_marker(Path(root)) or {}
@@ -578,9 +559,57 @@ def level_of_floor(root: str | Path) -> int | None:
     return next((levels.get(n) for n, p in floors.items() if p.resolve() == root), None)
 
 
+def record_digests(root: str | Path) -> dict[str, str]:
+    """{stage: sha256 of its record} of the stages the workspace at ``root`` has (records that are links or
+    not files are left out)."""
+    out = {}
+    for stage, d in STAGE_DIRS.items():
+        p = Path(root) / d / RECORD
+        if p.is_file() and not p.is_symlink():
+            out[stage] = _sha256_bytes(p.read_bytes())
+    return out
+
+
 def building_report_path(root: str | Path, command: str) -> Path:
-    """Where a stage's building-level report goes (``building/<command>.json``)."""
+    """Where a stage's building-level report goes (``building/<command>.json``); LinkError when its folder
+    is a symbolic link (never written through)."""
+    refuse_link(Path(root) / BUILDING_DIR)
     return Path(root) / BUILDING_DIR / f"{command}.json"
+
+
+def _resolved_root(root: str | Path) -> Path:
+    """``root`` with a symbolic link at its last component resolved (the workspace it points to)."""
+    p = Path(root)
+    return p.resolve() if p.is_symlink() else p
+
+
+#: what commands write inside a workspace besides its stage directories, relative to its root: the report
+#: page, and rerun recordings (``*.rrd``); and the folders of the report's figures and floor pages
+OUTPUTS_IN_WORKSPACE = ("report.html",)
+OUTPUT_DIRS_IN_WORKSPACE = ("report", "report_figures", "report_floors")
+
+
+def check_outside_workspace(path: str | Path, what: str = "output") -> None:
+    """InputError when ``path`` (an output a user names) falls among a workspace's own files: its stage
+    directories, marker, build state, building reports or floors (anything but the report page, its
+    figures and recordings), or is a workspace's lock file; never written, even with --force."""
+    p = Path(path)
+    full = p.parent.resolve() / p.name
+    if full.name.startswith(".") and full.name.endswith(".lock") and \
+            _is_marker(_read_marker(full.parent / full.name[1:-len(".lock")])):
+        raise InputError(f"{what} {p} is the lock file of workspace {full.parent / full.name[1:-5]}; choose "
+                         "another path")
+    for ws in full.parents:
+        if not _is_marker(_read_marker(ws)):
+            continue
+        parts = full.relative_to(ws).parts
+        ok = (len(parts) == 1 and (parts[0] in OUTPUTS_IN_WORKSPACE or parts[0].endswith(".rrd"))) or \
+            (len(parts) >= 2 and parts[0] in OUTPUT_DIRS_IN_WORKSPACE)
+        if not ok:
+            raise InputError(f"{what} {p} lies among the files of workspace {ws} ({parts[0]}), which only rmbuild's "
+                             "stages write; write it outside the workspace (or as its report.html, report/ or "
+                             "*.rrd)")
+        return
 
 
 def _recover(root: Path) -> None:
@@ -600,27 +629,6 @@ def _recover(root: Path) -> None:
                 recover()
         except WorkspaceError:  # busy (its holder recovers), or no lock can be created here
             pass
-
-
-def _read_marker(root: Path) -> dict | None:
-    """The parsed manifest.json of ``root`` (None when absent, unreadable, huge or not a JSON object)."""
-    p = root / MANIFEST
-    try:
-        if not p.is_file() or p.stat().st_size > MAX_MARKER_BYTES:
-            return None
-        m = json.loads(p.read_bytes())
-    except (OSError, ValueError):
-        return None
-    return m if isinstance(m, dict) else None
-
-
-def _is_marker(m: dict | None) -> bool:
-    """rmbuild's workspace marker, this layout's or the first one (schema 1, no "format" key)."""
-    if m is None:
-        return False
-    if m.get("format") == WORKSPACE_FORMAT:
-        return True
-    return m.get("schema_version") == 1 and "rmbuild_version" in m and isinstance(m.get("stages"), dict)
 
 
 def check_replaceable(root: Path, force: bool) -> None:
@@ -644,7 +652,7 @@ def _read_record(p: Path, stage: str) -> dict | None:
         if not p.is_file() or p.stat().st_size > 64 * MAX_MARKER_BYTES:
             return None
         rec = json.loads(p.read_bytes())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     ok = isinstance(rec, dict) and rec.get("stage") == stage and isinstance(rec.get("files"), dict)
     return rec if ok else None
@@ -685,8 +693,14 @@ def write_dataset(writer: StageWriter, ds: Dataset, fp: Fingerprints) -> None:
 
 
 def check_output_file(path: str | Path, force: bool, what: str = "output") -> Path:
-    """Refuse to replace an existing file (a report, a recording) without ``force``; returns the path."""
+    """Refuse to replace an existing file (a report, a recording) without ``force``, to write through a
+    symbolic link, or to write among a workspace's own files (:func:`check_outside_workspace`); returns the
+    path."""
     p = Path(path)
+    if p.is_symlink():
+        raise InputError(f"{what} {p} is a symbolic link; rmbuild never writes through one: give the file it "
+                         "points to, or another name")
+    check_outside_workspace(p, what)
     if p.is_dir():
         raise InputError(f"{what} {p} is a directory")
     if p.exists() and not force:

@@ -84,6 +84,14 @@ class Query:
         return out
 
     @staticmethod
+    def count(dataset: Dataset, walk_ids: list[str], unit: Literal["scan", "node"] = "scan") -> int:
+        """How many queries :meth:`from_dataset` makes of these walks (before their table is allocated)."""
+        wifi = dataset.wifi
+        wifi = wifi[wifi["walk_id"].astype(str).isin(set(map(str, walk_ids)))]
+        cols = ["walk_id", "t_s"] if unit == "scan" else ["walk_id", "node"]
+        return int(wifi[cols].drop_duplicates().shape[0]) if len(wifi) else 0
+
+    @staticmethod
     def from_dataset(
         dataset: Dataset,
         walk_ids: list[str],
@@ -117,10 +125,11 @@ class Query:
         m = len(bssids)
         flat = grp[ok] * m + col[ok]
         rss = wifi["rssi_dbm"].to_numpy(dtype=np.float64)[ok]
-        sums = np.bincount(flat, weights=rss, minlength=n_q * m).reshape(n_q, m)
-        cnt = np.bincount(flat, minlength=n_q * m).reshape(n_q, m)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(cnt > 0, sums / np.maximum(cnt, 1), np.nan).astype(np.float32)
+        # sums over the heard (query, AP) cells only: the dense table is written once, as float32
+        cells, inv = np.unique(flat, return_inverse=True)
+        flat_mean = np.full(n_q * m, np.nan, dtype=np.float32)
+        flat_mean[cells] = np.bincount(inv, weights=rss, minlength=len(cells)) / np.bincount(inv, minlength=len(cells))
+        mean = flat_mean.reshape(n_q, m)
         size = np.bincount(grp, minlength=n_q)
         t_q = np.bincount(grp, weights=t, minlength=n_q) / np.maximum(size, 1)
         first = np.full(n_q, -1, dtype=np.int64)

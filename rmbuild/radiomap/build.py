@@ -23,6 +23,7 @@ import pandas as pd
 from rmbuild.config.base import to_toml
 from rmbuild.config.radiomap import MapConfig
 from rmbuild.errors import InputError
+from rmbuild.limits import MAX_MAP_CELLS, MAX_MAP_RASTER_CELLS
 from rmbuild.radiomap.histogram import HistogramLayer, build_histograms, motion_directions
 from rmbuild.radiomap.reference import ReferenceSet
 from rmbuild.types import Fingerprints
@@ -188,6 +189,27 @@ class RadioMap:
         return [int(j) for j in order[:top_n] if np.isfinite(peak[j])]
 
 
+def check_raster(xy: np.ndarray, origin: np.ndarray, cell_size_m: float) -> None:
+    """InputError unless the grid's bounding box over the positions ``xy`` (n, 2) has at most
+    :data:`MAX_MAP_RASTER_CELLS` cells (the map's pictures and viewer images are rasters of it)."""
+    lo = np.floor((xy.min(axis=0) - origin) / cell_size_m)
+    hi = np.floor((xy.max(axis=0) - origin) / cell_size_m)
+    nx, ny = (hi - lo + 1).tolist()
+    if nx * ny > MAX_MAP_RASTER_CELLS:
+        w, h = (xy.max(axis=0) - xy.min(axis=0)).tolist()
+        raise InputError(f"the map's nodes span {w:,.0f} x {h:,.0f} m: at cell_size_m = {cell_size_m:g} m a raster of "
+                         f"{nx * ny:,.0f} cells, at most {MAX_MAP_RASTER_CELLS:,} (the map's pictures are rasters of "
+                         "it); give a larger cell size")
+
+
+def check_table(n_cells: int, n_aps: int) -> None:
+    """InputError unless a map of ``n_cells`` cells and ``n_aps`` APs (its tables dense: cells × APs) has at
+    most :data:`MAX_MAP_CELLS` entries."""
+    if n_cells * n_aps > MAX_MAP_CELLS:
+        raise InputError(f"a map of {n_cells:,} cells x {n_aps:,} APs: {n_cells * n_aps:,} entries, at most "
+                         f"{MAX_MAP_CELLS:,} (its tables are dense); give a larger cell size")
+
+
 def grid_origin(xy: np.ndarray, cell_size_m: float) -> np.ndarray:
     """Minimum of the finite positions snapped down to a multiple of the cell size (so grids line up)."""
     xy = np.asarray(xy, dtype=float)
@@ -263,6 +285,7 @@ def build_radio_map(
     s = float(cfg.cell_size_m)
     origin = grid_origin(node_xy[np.unique(node_i)], s) if origin_xy is None else np.asarray(origin_xy, float)
     rss = w["rssi_dbm"].to_numpy(dtype=np.float64)
+    check_raster(node_xy[np.unique(node_i)], origin, s)
     ixy = np.floor((node_xy[node_i] - origin) / s).astype(np.int64)
     _, walk_code = np.unique(node_walk.astype(str), return_inverse=True)
     walk_r = walk_code[node_i]
@@ -275,39 +298,49 @@ def build_radio_map(
 
     cells_u, cell_r = _unique_count(ixy[:, 0], ixy[:, 1])
     n_c, m = len(cells_u), len(bssids)
+    # statistics over the (cell, AP) entries some reading fell in; the dense (cell, AP) tables are written once
     flat = cell_r * m + col
-    cnt = np.bincount(flat, minlength=n_c * m)
-    mean = np.bincount(flat, weights=rss, minlength=n_c * m) / np.maximum(cnt, 1)
-    ss = np.bincount(flat, weights=(rss - mean[flat]) ** 2, minlength=n_c * m)
+    ent, inv = np.unique(flat, return_inverse=True)
+    cnt_e = np.bincount(inv, minlength=len(ent))
+    mean_e = np.bincount(inv, weights=rss, minlength=len(ent)) / cnt_e
+    ss_e = np.bincount(inv, weights=(rss - mean_e[inv]) ** 2, minlength=len(ent))
     with np.errstate(invalid="ignore", divide="ignore"):
-        std = np.where(cnt >= 2, np.sqrt(ss / np.maximum(cnt - 1, 1)), np.nan)
+        std_e = np.where(cnt_e >= 2, np.sqrt(ss_e / np.maximum(cnt_e - 1, 1)), np.nan)
     # scans per cell and scans that saw each AP (a scan's duplicates of one AP count once)
     scan_cell = np.zeros(int(scan.max()) + 1, dtype=np.int64)
     scan_cell[scan] = cell_r
     visits = np.bincount(scan_cell, minlength=n_c)
     sa = np.unique(scan * m + col)
-    seen = np.bincount(scan_cell[sa // m] * m + sa % m, minlength=n_c * m)
-    ratio = seen.reshape(n_c, m) / np.maximum(visits, 1)[:, None]
-    cw = np.unique((cell_r * m + col) * (walk_code.max() + 1) + walk_r)
-    nw = np.bincount(cw // (walk_code.max() + 1), minlength=n_c * m).reshape(n_c, m)
-    cwc = np.unique(cell_r * (walk_code.max() + 1) + walk_r)
-    n_walk_cell = np.bincount(cwc // (walk_code.max() + 1), minlength=n_c)
+    seen_e = np.bincount(np.searchsorted(ent, scan_cell[sa // m] * m + sa % m), minlength=len(ent))
+    ratio_e = seen_e / np.maximum(visits[ent // m], 1)
+    n_w = walk_code.max() + 1
+    nw_e = np.bincount(np.searchsorted(ent, np.unique(flat * n_w + walk_r) // n_w), minlength=len(ent))
+    cwc = np.unique(cell_r * n_w + walk_r)
+    n_walk_cell = np.bincount(cwc // n_w, minlength=n_c)
     n_node_cell = np.bincount(np.unique(cell_r * (len(node_xy) + 1) + node_i) // (len(node_xy) + 1),
                               minlength=n_c)
 
-    cnt = cnt.reshape(n_c, m)
-    mean = mean.reshape(n_c, m)
-    std = std.reshape(n_c, m)
-    drop = cnt < cfg.min_count  # includes never detected (count 0)
-    mean[drop] = np.nan
-    std[drop] = np.nan
-    cnt[drop] = 0
-    ratio[drop] = 0.0
-    nw[drop] = 0
     keep_c = visits >= cfg.min_scans
     if not keep_c.any():
         raise InputError(f"no grid cell has at least min_scans = {cfg.min_scans} scans")
-    cells_u, cnt, mean, std, ratio, nw = (np.asarray(a)[keep_c] for a in (cells_u, cnt, mean, std, ratio, nw))
+    n_k = int(keep_c.sum())
+    check_table(n_k, m)
+    row_of_cell = np.full(n_c, -1, dtype=np.int64)
+    row_of_cell[keep_c] = np.arange(n_k)
+    r_e, c_e = row_of_cell[ent // m], ent % m
+    sel = (r_e >= 0) & (cnt_e >= cfg.min_count)  # fewer than min_count readings: not detected
+    r_e, c_e = r_e[sel], c_e[sel]
+    cnt = np.zeros((n_k, m), dtype=np.int32)
+    mean = np.full((n_k, m), np.nan)
+    std = np.full((n_k, m), np.nan)
+    ratio = np.zeros((n_k, m))
+    nw = np.zeros((n_k, m), dtype=np.int32)
+    cnt[r_e, c_e] = cnt_e[sel]
+    mean[r_e, c_e] = mean_e[sel]
+    std[r_e, c_e] = std_e[sel]
+    ratio[r_e, c_e] = ratio_e[sel]
+    nw[r_e, c_e] = nw_e[sel]
+    cells_u = cells_u[keep_c]
     cells = pd.DataFrame({
         "ix": cells_u[:, 0], "iy": cells_u[:, 1],
         "x_m": origin[0] + (cells_u[:, 0] + 0.5) * s, "y_m": origin[1] + (cells_u[:, 1] + 0.5) * s,

@@ -21,22 +21,43 @@ import pandas as pd
 
 from rmbuild.config.radiomap import FillConfig
 from rmbuild.errors import InputError
+from rmbuild.limits import MAX_MAP_CELLS
+
+#: (visited cell, offset) pairs the candidate search looks at in one block, and elements of the fill's
+#: (candidates, neighbours, APs) products computed at once: bounded memory on any map
+_PAIR_BLOCK = 1 << 22
+_BLOCK_ELEMS = 1 << 22
 
 
 def _candidates(cells: pd.DataFrame, max_d: float, s: float) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
+    """(n, 2) int64 grid indices of the unvisited cells whose centre lies within ``max_d`` of a visited
+    cell's centre: the visited cells' neighbourhoods (offsets within the distance), not their bounding box,
+    so that a map spread over kilometres costs what its cells do. InputError when there would be more than
+    the map's tables can hold (:data:`MAX_MAP_CELLS` over the map's APs)."""
     vis = cells[["ix", "iy"]].to_numpy(dtype=np.int64)
     r = int(np.ceil(max_d / s))
-    lo, hi = vis.min(axis=0) - r, vis.max(axis=0) + r
-    gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
-    allc = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    visited = set(map(tuple, vis.tolist()))
-    allc = allc[[tuple(c) not in visited for c in allc.tolist()]]
-    if len(allc) == 0:
-        return allc
-    d, _ = cKDTree(vis.astype(float)).query(allc.astype(float), k=1)
-    return allc[d * s <= max_d + 1e-9]
+    ox, oy = np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1), indexing="ij")
+    near = np.hypot(ox, oy) * s <= max_d + 1e-9
+    off = np.stack([ox[near], oy[near]], axis=1)
+    span = int(np.ptp(vis[:, 1])) + 2 * r + 1 if len(vis) else 1
+    base = vis[:, 1].min() - r if len(vis) else 0
+
+    def key(ij: np.ndarray) -> np.ndarray:  # one integer per cell (row-major over the padded y range)
+        return ij[:, 0] * span + (ij[:, 1] - base)
+
+    visited = np.unique(key(vis))
+    found: list[np.ndarray] = []
+    n_found = 0
+    per = max(1, _PAIR_BLOCK // max(len(off), 1))
+    for b in range(0, len(vis), per):
+        k = np.unique(key((vis[b:b + per, None, :] + off[None, :, :]).reshape(-1, 2)))
+        k = k[~np.isin(k, visited, assume_unique=True)]
+        found.append(k)
+        n_found += len(k)
+        if n_found > MAX_MAP_CELLS:
+            break
+    keys = np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
+    return np.stack([keys // span, keys % span + base], axis=1)
 
 
 def fill_cells(cells, cnt, mean, std, ratio, nw, origin, s, cfg: FillConfig):
@@ -46,24 +67,36 @@ def fill_cells(cells, cnt, mean, std, ratio, nw, origin, s, cfg: FillConfig):
     cand = _candidates(cells, cfg.max_distance_m, s)
     if len(cand) == 0:
         return cells, cnt, mean, std, ratio, nw
+    m = mean.shape[1]
+    if (len(cells) + len(cand)) * m > MAX_MAP_CELLS:
+        raise InputError(f"fill: {len(cand):,} unvisited cells within fill.max_distance_m = {cfg.max_distance_m:g} m "
+                         f"of the {len(cells):,} visited ones, x {m:,} APs: more than the {MAX_MAP_CELLS:,} entries a "
+                         "map's tables hold; lower fill.max_distance_m or give a larger cell size")
     vis_xy = cells[["x_m", "y_m"]].to_numpy(dtype=np.float64)
     cand_xy = origin + (cand + 0.5) * s
     k = min(cfg.idw_neighbours, len(vis_xy))
     d, nb = cKDTree(vis_xy).query(cand_xy, k=k)
     d, nb = d.reshape(len(cand), k), nb.reshape(len(cand), k)
     w = 1.0 / np.maximum(d, 1e-9) ** cfg.idw_power  # (nc, k)
-    p = (w[:, :, None] * ratio[nb]).sum(axis=1) / w.sum(axis=1)[:, None]  # (nc, m)
-    keep = p >= cfg.min_detect_ratio
     det = ~np.isnan(mean)
+    p = np.empty((len(cand), m))
+    f_mean, f_std, sw = np.empty((len(cand), m)), np.empty((len(cand), m)), np.empty((len(cand), m))
+    step = max(1, _BLOCK_ELEMS // (k * m))  # the (candidates, k, APs) products a block of candidates at a time
+    for b in range(0, len(cand), step):
+        wb, nbb = w[b:b + step], nb[b:b + step]
+        p[b:b + step] = (wb[:, :, None] * ratio[nbb]).sum(axis=1) / wb.sum(axis=1)[:, None]  # (nc, m)
+        if cfg.method == "idw":
+            wd = wb[:, :, None] * det[nbb]
+            sw[b:b + step] = wd.sum(axis=1)
+            mu_n = np.nan_to_num(mean[nbb])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                fm = (wd * mu_n).sum(axis=1) / sw[b:b + step]
+                var_between = (wd * (mu_n - fm[:, None, :]) ** 2).sum(axis=1) / sw[b:b + step]
+                var_within = (wd * np.nan_to_num(std[nbb]) ** 2).sum(axis=1) / sw[b:b + step]
+            f_mean[b:b + step] = fm
+            f_std[b:b + step] = np.sqrt(var_between + var_within)
+    keep = p >= cfg.min_detect_ratio
     if cfg.method == "idw":
-        wd = w[:, :, None] * det[nb]
-        sw = wd.sum(axis=1)
-        mu_n = np.nan_to_num(mean[nb])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            f_mean = (wd * mu_n).sum(axis=1) / sw
-            var_between = (wd * (mu_n - f_mean[:, None, :]) ** 2).sum(axis=1) / sw
-            var_within = (wd * np.nan_to_num(std[nb]) ** 2).sum(axis=1) / sw
-        f_std = np.sqrt(var_between + var_within)
         keep &= sw > 0
     else:
         f_mean, f_std = _gp(vis_xy, cand_xy, mean, keep, cfg)
@@ -110,10 +143,18 @@ def _gp(vis_xy, cand_xy, mean, keep, cfg: FillConfig):
         x = vis_xy[tr]
         y = mean[tr, j].astype(np.float64)
         mu = y.mean()
-        kxx = sf2 * np.exp(-((x[:, None, :] - x[None, :, :]) ** 2).sum(-1) / l2) + sn2 * np.eye(len(tr))
-        ks = sf2 * np.exp(-((cand_xy[rows][:, None, :] - x[None, :, :]) ** 2).sum(-1) / l2)
+        kxx = sf2 * np.exp(-_sq_dist(x, x) / l2) + sn2 * np.eye(len(tr))
         c = cho_factor(kxx, lower=True)
-        f_mean[rows, j] = mu + ks @ cho_solve(c, y - mu)
-        v = np.einsum("ij,ji->i", ks, cho_solve(c, ks.T))
-        f_std[rows, j] = np.sqrt(np.maximum(sf2 - v, 0.0) + sn2)
+        alpha = cho_solve(c, y - mu)
+        for b in range(0, len(rows), max(1, _BLOCK_ELEMS // len(tr))):  # (rows, cells) kernels a block at a time
+            rb = rows[b:b + max(1, _BLOCK_ELEMS // len(tr))]
+            ks = sf2 * np.exp(-_sq_dist(cand_xy[rb], x) / l2)
+            f_mean[rb, j] = mu + ks @ alpha
+            v = np.einsum("ij,ji->i", ks, cho_solve(c, ks.T))
+            f_std[rb, j] = np.sqrt(np.maximum(sf2 - v, 0.0) + sn2)
     return f_mean, f_std
+
+
+def _sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a), len(b)) squared distances of points (n, 2), without an (n, m, 2) temporary."""
+    return (a[:, None, 0] - b[None, :, 0]) ** 2 + (a[:, None, 1] - b[None, :, 1]) ** 2

@@ -19,10 +19,10 @@ from typing import Any
 from rmbuild import __version__
 from rmbuild.config import load_stage_config, to_toml
 from rmbuild.config.build import parse_scheduler
-from rmbuild.errors import RmbuildError, one_line
+from rmbuild.errors import RmbuildError, WorkspaceError, one_line
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floorplan import plan_image_file
-from rmbuild.io.lock import workspace_lock
+from rmbuild.io.lock import shared_while, workspace_lock
 from rmbuild.io.venues import Venue
 from rmbuild.io.workspace import (
     Workspace,
@@ -34,10 +34,12 @@ from rmbuild.io.workspace import (
 from rmbuild.stages.building.state import (
     STATE_VERSION,
     floor_is_current,
+    hand_made,
     input_fingerprint,
     keeping_unchanged_floors,
     read_state,
     same_inputs,
+    stage_records,
     write_state,
 )
 from rmbuild.stages.building.task import (
@@ -76,6 +78,10 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
     with ExitStack() as stack:
         stack.enter_context(workspace_lock(workspace, "build"))
         state = None if force else _previous_state(workspace)
+        made = hand_made(workspace, state) if state is not None else []
+        if made:
+            raise WorkspaceError(f"{'; '.join(made)}: build would replace that with its own config; pass --force "
+                                 "to rebuild it")
         # the floor plan's content (and its image's) is fingerprinted after the inputs
         settings = {"ingest": to_toml(cfgs["ingest"], "ingest"), "pdr": to_toml(cfgs["pdr"], "pdr"), "format": fmt,
                     "floorplan": floorplan is not None}
@@ -159,6 +165,10 @@ def run_floors_as_tasks(workspace: str | Path, cfgs: dict[str, Any], force: bool
         if runner is None or len(todo) <= 1:  # one floor (a single-floor workspace): in this process
             runner = stack.enter_context(executor(sched, len(todo), cfgs["build"].worker_memory_gb, on_cluster))
         runner.fit(len(todo))
+        if index is not None and not runner.in_process:
+            # the floors' tasks lock their floors (and the building, shared): in worker processes they could
+            # not while this one held the building exclusively
+            stack.enter_context(shared_while(workspace))
         ran = _run_round(runner, run_floor, todo, progress, f"floors ({cfgs['build'].scheduler})", "floors",
                          _state_keeper(workspace, state, items)) if todo else {}
         t_tasks = time.perf_counter() - t0
@@ -188,7 +198,7 @@ def _state_keeper(workspace: str | Path, state: dict | None, items: dict[str, tu
 
     def keep(name: str, r: dict) -> None:
         if r.get("ok"):
-            state["floors"][name] = {"configs": items[name][2], "result": r}
+            state["floors"][name] = {"configs": items[name][2], "result": r, "records": stage_records(items[name][1])}
         else:
             state["floors"].pop(name, None)
         write_state(workspace, state)
@@ -242,8 +252,10 @@ def _venue_floors(runner: Runner, wss: dict[str, Path], vcfgs: dict[str, dict[st
         for n, ws in list(wss.items()):
             try:
                 vitems, indexes[n] = _floor_items(ws, vcfgs[n], force)
-                if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's)
+                if indexes[n] is not None:  # a building: its lock is the client's (a single floor's: its task's),
+                    # shared while the floors' tasks run on the workers (they lock their floors and it, shared)
                     locks.enter_context(workspace_lock(ws, "build"))
+                    locks.enter_context(shared_while(ws))
             except RmbuildError as e:  # taken by another command since its ingest: this venue only
                 not_run[n] = one_line(str(e))
                 del wss[n]

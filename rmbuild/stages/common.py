@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Protocol
 
-from rmbuild.errors import WorkspaceError
+from rmbuild.errors import InputError, WorkspaceError
 from rmbuild.io.lock import workspace_lock
 from rmbuild.io.workspace import Workspace
 
@@ -46,9 +46,16 @@ ProgressCallback = Callable[[str, dict], None]
 
 @contextmanager
 def locked_workspace(root: str | Path, command: str, exclusive: bool = True) -> Iterator[Workspace]:
-    """The workspace at ``root``, opened under its lock (exclusive for commands that write) for the block."""
+    """The workspace at ``root``, opened under its lock (exclusive for commands that write) for the block. An
+    input error raised in the block without a place (what the workspace's data cannot give: a map too large
+    to raster, too little ground truth to score) is said of the workspace."""
     if not Path(root).is_dir():
         raise WorkspaceError(f"{root} is not an rmbuild workspace (no such directory); create one with "
                              "`rmbuild ingest`")
     with workspace_lock(root, command, exclusive):
-        yield Workspace.open(root)
+        try:
+            yield Workspace.open(root)
+        except InputError as e:
+            if e.where is not None:
+                raise
+            raise InputError(str(e), str(root)) from None

@@ -9,6 +9,7 @@ workspace's atomic writers. A task that raises, or whose worker dies (killed, ou
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -25,10 +26,17 @@ CONNECT_TIMEOUT_S = 30
 #: once): it doubled a floor task's system time (~1.5 s more of ~18 s of CPU on MS ILC site2 B1, paired
 #: runs in docs/notes/scale-out.md): left out.
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-#: Dask config of a local cluster: the environment above, and no statistical profiler in the workers (it
-#: samples the running task's stack every 10 ms under the GIL: ~5% of a floor task's CPU time, same runs)
+#: Dask config of a local cluster: the environment above, no statistical profiler in the workers (it
+#: samples the running task's stack every 10 ms under the GIL: ~5% of a floor task's CPU time, same runs);
+#: a task whose worker dies fails at once (its floor is reported failed, naming the cause, and the next
+#: `build` redoes it) instead of being run again elsewhere, so that a killed worker never holds the build
+#: for another whole floor's time; and each worker dies with rmbuild's process (no orphans after a kill -9)
 LOCAL_CLUSTER_CONFIG = {"distributed.nanny.pre-spawn-environ": WORKER_ENV,
-                        "distributed.worker.profile.enabled": False}
+                        "distributed.worker.profile.enabled": False,
+                        "distributed.scheduler.allowed-failures": 0,
+                        "distributed.worker.preload": ["rmbuild.stages.dask_worker"]}
+#: s; the first round waits at most this long for the workers' warm-up (imports) before it starts anyway
+WARM_UP_WAIT_S = 120
 
 
 def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Scheduler,
@@ -43,7 +51,10 @@ def run_tasks(fn: Callable[..., dict], items: dict[str, tuple], scheduler: Sched
 
 class Runner(Protocol):
     """Runs ``fn`` over ``items`` (name -> args), returns name -> result (in the order of ``items``), calls
-    ``on_done(name, result)`` as each ends."""
+    ``on_done(name, result)`` as each ends. ``in_process``: the items run in this process (else in other
+    processes, which hold their own workspace locks)."""
+
+    in_process: bool
 
     def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
                  on_done: Callable[[str, dict], None] | None) -> dict[str, dict]: ...
@@ -54,6 +65,8 @@ class Runner(Protocol):
 
 
 class _Serial:
+    in_process = True
+
     def __call__(self, fn: Callable[..., dict], items: dict[str, tuple],
                  on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
         out = {}
@@ -68,6 +81,8 @@ class _Serial:
 
 
 class _OnDask:
+    in_process = False
+
     def __init__(self, client: Any, shrinkable: bool, warming: list) -> None:
         self.client, self.shrinkable, self.warming = client, shrinkable, warming
 
@@ -76,7 +91,13 @@ class _OnDask:
         if self.warming:
             from distributed import wait
 
-            wait(self.warming)  # a warm-up that failed (a worker died) leaves its floor to fail on its own
+            # a warm-up is only an optimisation: one whose worker died has failed (or runs elsewhere), and none
+            # holds the round longer than WARM_UP_WAIT_S
+            try:
+                wait(self.warming, timeout=WARM_UP_WAIT_S)
+            except TimeoutError:
+                pass
+            self.client.cancel([f for f in self.warming if not f.done()])
             self.warming = []
         return _submit_all(self.client, fn, items, on_done)
 
@@ -107,7 +128,7 @@ def executor(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float 
 def _warm_up(client: Any, warm: Callable[[], None]) -> list:
     """``warm()`` on every worker, as a task of its own: the futures (the first round waits for them, so
     that a worker still warming does not leave every floor to the others)."""
-    return [client.submit(warm, workers=[w], allow_other_workers=False, pure=False,
+    return [client.submit(warm, workers=[w], allow_other_workers=True, pure=False,
                           key=f"rmbuild-warm-up-{i}-{os.urandom(4).hex()}")
             for i, w in enumerate(client.scheduler_info().get("workers", {}))]
 
@@ -129,6 +150,7 @@ def failed(e: BaseException) -> dict:
 def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
                 on_done: Callable[[str, dict], None] | None) -> dict[str, dict]:
     from distributed import as_completed
+    from distributed.scheduler import KilledWorker
 
     # the items start in the order given (the caller puts the longest first): the first has the highest priority
     futures = {client.submit(call_task, fn, *args, key=f"rmbuild-{name}-{os.urandom(4).hex()}", pure=False,
@@ -136,11 +158,18 @@ def _submit_all(client: Any, fn: Callable[..., dict], items: dict[str, tuple],
                for i, (name, args) in enumerate(items.items())}
     out: dict[str, dict] = {}
     for fut in as_completed(list(futures)):
-        name = futures[fut]
+        name = futures.pop(fut)
         try:
             out[name] = fut.result()
-        except Exception as e:  # the worker died (KilledWorker) or the result could not come back
+        except KilledWorker:
+            out[name] = {"ok": False, "error": "its Dask worker died while running it (killed, or out of memory); the "
+                                               "next `rmbuild build` redoes it"}
+        except Exception as e:  # the result could not come back
             out[name] = failed(e)
+        # let the result go: a worker that dies holding it would otherwise make Dask run the task again (a floor
+        # rewritten behind the build's back after it was recorded done)
+        fut.release()
+        del fut
         if on_done is not None:
             on_done(name, out[name])
     return {name: out[name] for name in items}
@@ -164,13 +193,25 @@ def _client(scheduler: Scheduler, n_items: int | None, worker_memory_gb: float) 
     cores = os.cpu_count() or 1
     n = scheduler.workers or max(1, min(n_items or cores, cores))
     memory: Any = int(worker_memory_gb * 1e9) if worker_memory_gb > 0 else "auto"
-    with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies pass it on to the workers they start
-        # the scheduler's web server (the dashboard when bokeh is installed) on a free port, not Dask's 8787:
-        # another cluster on the machine may hold that one
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory,
-                               dashboard_address=":0")
-    with cluster, Client(cluster) as client:
-        yield client
+    # the scheduler's and nannies' own log lines (a lost worker, a restart): rmbuild reports a floor whose
+    # worker died itself, on one line
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
+    try:
+        with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies pass it on to the workers they start
+            try:
+                # the scheduler's web server (the dashboard when bokeh is installed) on a free port, not Dask's
+                # 8787: another cluster on the machine may hold that one
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory,
+                                       dashboard_address=":0")
+            except (RuntimeError, OSError, TimeoutError) as e:  # a worker died as it started
+                raise RmbuildError(f"the local Dask cluster did not start ({one_line(str(e))[:200]}); nothing was "
+                                   "built: run again, or use --scheduler serial") from None
+        with cluster, Client(cluster) as client:
+            yield client
+    finally:
+        quiet.setLevel(level)
 
 
 def _has_bokeh() -> bool:

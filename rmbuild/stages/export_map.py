@@ -62,7 +62,10 @@ def _run(ws: Workspace, cfg: MapConfig, anchors_path: str | Path | None, progres
     progress.phase("rasterising")
     walk_of_node = ds.poses["walk_id"].astype(str).to_numpy()
     offsets = info["device_offsets_db"]
-    rm = build_radio_map(devices.corrected(ds, offsets).wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    try:
+        rm = build_radio_map(devices.corrected(ds, offsets).wifi, xy, walk_of_node, cfg, frame=info["frame"])
+    except InputError as e:  # the map's own limits: name the workspace whose map it is
+        raise InputError(e.problem, e.where or str(ws.root)) from None
     rm.device_offsets_db = offsets
     ble_rm, ble_skipped = _ble_map(ds.ble, xy, walk_of_node, cfg, rm)
     t_build = time.perf_counter() - t0

@@ -34,6 +34,7 @@ import pandas as pd
 from rmbuild.config import EvaluateConfig, IngestConfig, PdrConfig, load_stage_config_text
 from rmbuild.errors import InputError
 from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.limits import MAX_QUERIES, MAX_QUERY_CELLS
 from rmbuild.radiomap import devices
 from rmbuild.radiomap.build import RadioMap
 from rmbuild.stages.common import Progress, ensure_progress, locked_workspace
@@ -43,6 +44,18 @@ log = logging.getLogger(__name__)
 
 #: output suffix -> table format
 OUTPUT_FORMATS = {".csv": "csv", ".parquet": "parquet", ".geojson": "geojson"}
+
+
+def check_query_size(n_queries: int, n_aps: int, inputs: list[str | Path]) -> None:
+    """At most :data:`MAX_QUERIES` queries, and their table (scans × the map's APs, dense) at most
+    :data:`MAX_QUERY_CELLS` cells."""
+    if n_queries > MAX_QUERIES:
+        raise InputError(f"{n_queries:,} scans: at most {MAX_QUERIES:,} in one run (localize the input in parts)",
+                         ", ".join(map(str, inputs)))
+    if n_queries * n_aps > MAX_QUERY_CELLS:
+        raise InputError(f"{n_queries:,} scans against a map of {n_aps:,} APs: a query table of {n_queries * n_aps:,} "
+                         f"cells, at most {MAX_QUERY_CELLS:,} in one run (localize the input in parts)",
+                         ", ".join(map(str, inputs)))
 
 
 @dataclass
@@ -96,7 +109,9 @@ def run(
             rm, hold_note = held_out_map(ws, ds)
             geo = _georef(ws, rm, out, floor)
         ds = devices.corrected(ds, rm.device_offsets_db)  # the map's phones' offsets on their queries too
-        query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=cfg.query if new.kind == "walks" else "scan")
+        unit = cfg.query if new.kind == "walks" else "scan"
+        check_query_size(Query.count(ds, ds.walk_ids(), unit), len(rm.bssids), inputs)
+        query = Query.from_dataset(ds, ds.walk_ids(), rm.bssids, unit=unit)
         if new.kind == "scans":
             query.steps = None
         if len(query) == 0:

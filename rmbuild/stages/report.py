@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rmbuild.errors import InputError
 from rmbuild.io.atomic import write_bytes_atomic, write_text_atomic
-from rmbuild.io.workspace import Workspace, check_output_file
+from rmbuild.io.workspace import Workspace, check_output_file, check_outside_workspace
 from rmbuild.stages.building import building_page, floor_workspaces, run_floors
 from rmbuild.stages.common import locked_workspace
 
@@ -53,6 +53,10 @@ def run(workspace: str | Path, out: str | Path | None = None, heatmap_top_n: int
     with locked_workspace(workspace, "report", exclusive=False) as ws:
         page = check_output_file(out_p if out_p is not None else ws.path("report.html"), force, "report")
         png_p = figures_dir(out_p) if out_p is not None else ws.path("report.png_dir")
+        if png_p.is_symlink():
+            raise InputError(f"{png_p} is a symbolic link; rmbuild never writes through one: give the folder it "
+                             "points to, or another")
+        check_outside_workspace(png_p / "figure.png", "report figures")
         if not force and png_p.is_dir() and any(png_p.glob("*.png")):
             raise InputError(f"{png_p} already holds report figures; pass --force to replace them")
         return _write(ws, page, png_p, heatmap_top_n)

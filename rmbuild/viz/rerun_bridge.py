@@ -76,6 +76,8 @@ FLOOR = "floor"
 RAW = "raw"
 PLOTS = "plots"
 MAP = "map"
+#: elements of each (AP, y, x) map tensor at most (float32: 32 MB): a large map's tensors show fewer APs
+TENSOR_MAX_ELEMS = 8_000_000
 
 def _spawn(rec) -> None:
     """Open (or connect to) the native viewer on rerun's default port (9876); a one-line error when there is
@@ -559,6 +561,8 @@ class RerunViewer:
                else np.full(len(cells), np.nan))
         codes, aps = pd.factorize(cells["bssid"].astype(str), sort=True)
         heard = np.bincount(codes, weights=count, minlength=len(aps))
+        # the tensors are (AP, y, x) over the map's bounding box: fewer APs on a large map (bounded memory)
+        max_aps = max(1, min(max_aps, TENSOR_MAX_ELEMS // max(nx * ny, 1)))
         keep_aps = np.sort(np.argsort(-heard, kind="stable")[:max_aps])
         remap = np.full(len(aps), -1)
         remap[keep_aps] = np.arange(len(keep_aps))

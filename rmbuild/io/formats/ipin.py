@@ -11,9 +11,11 @@ used. Every other tag is skipped with a count. docs/formats-real.md describes th
 from __future__ import annotations
 
 import gzip
+import io
 import math
 import re
 import zlib
+from array import array
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +25,9 @@ import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig, IpinConfig
 from rmbuild.errors import InputError
+from rmbuild.io.compressed import read_bytes
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.limits import MAX_TRACE_BYTES
 from rmbuild.pdr import (
     ImuSignals,
     accuracy_flags,
@@ -74,15 +78,9 @@ def _walk_id(p: Path) -> str:
 
 
 def _read_text(p: Path) -> str:
+    raw = read_bytes(p, MAX_TRACE_BYTES, "logfile")
     try:
-        raw = p.read_bytes()
-        if p.name.lower().endswith(".gz"):
-            raw = gzip.decompress(raw)
         return raw.decode("utf-8")
-    except EOFError:
-        raise InputError("gzip data ends early (truncated file)", str(p)) from None
-    except (gzip.BadGzipFile, zlib.error, OSError) as e:
-        raise InputError(f"cannot read file ({e})", str(p)) from None
     except UnicodeDecodeError:
         try:
             return raw.decode("latin-1")
@@ -96,7 +94,7 @@ def _first_lines(p: Path, n: int = 40) -> list[str]:
         out: list[str] = []
         with opener(p, "rt", encoding="utf-8", errors="replace") as fh:  # type: ignore[operator]
             for _ in range(n):
-                line = fh.readline()
+                line = fh.readline(MAX_LINE_CHARS + 1)
                 if not line:
                     break
                 if line.strip():
@@ -145,15 +143,18 @@ def parse_logfile(path: Path) -> _Log:
     """Parse one GetSensorData logfile (no PDR yet). Malformed lines -> InputError naming file:line."""
     text = _read_text(path)
     log = _Log(path, _walk_id(path), "")
-    rows: dict[str, list[list[float]]] = {t: [] for t in _FIELDS}
-    lnos: dict[str, list[int]] = {t: [] for t in _FIELDS}
+    # compact while reading (a logfile may hold a million lines): values flat as doubles, one text pair per
+    # distinct (name, MAC) shared by every row that has it
+    rows: dict[str, array] = {t: array("d") for t in _FIELDS}
+    lnos: dict[str, array] = {t: array("q") for t in _FIELDS}
     wifi_text: list[tuple[str, str]] = []
     ble_text: list[tuple[str, str]] = []
+    pairs: dict[tuple[str, str], tuple[str, str]] = {}
     manufacturer = model = ""
     created = math.nan
     seen_data = False
-    for i, raw in enumerate(text.split("\n"), 1):
-        line = raw.rstrip("\r")
+    for i, raw in enumerate(io.StringIO(text, newline="\n"), 1):
+        line = raw.rstrip("\n").rstrip("\r")
         if len(line) > MAX_LINE_CHARS:
             raise InputError(f"line of {len(line):,} characters (a logfile line has at most a few hundred; the "
                              f"limit is {MAX_LINE_CHARS:,})", f"{path}:{i}")
@@ -181,8 +182,8 @@ def parse_logfile(path: Path) -> _Log:
             log.skipped[tag] += 1
             continue
         if tag == "BLE4":
-            vals = _ble4(parts, where, ble_text)
-            rows[tag].append(vals)
+            vals = _ble4(parts, where, ble_text, pairs)
+            rows[tag].extend(vals)
             lnos[tag].append(i)
             continue
         if len(parts) > _FIELDS[tag] and parts[-1] == "" and tag != "WIFI":
@@ -200,7 +201,7 @@ def parse_logfile(path: Path) -> _Log:
                 raise InputError(f"WIFI: BSSID {parts[-3]!r} is not a MAC address", where)
             vals = [_float(parts[1], tag, where), _float(parts[2], tag, where), _float(parts[-2], tag, where),
                     _float(parts[-1], tag, where)]
-            wifi_text.append((ssid, bssid))
+            wifi_text.append(pairs.setdefault((ssid, bssid), (ssid, bssid)))
         else:
             if len(parts) != n:
                 raise InputError(f"{tag}: expected {n} ';'-separated fields, got {len(parts)}", where)
@@ -211,7 +212,7 @@ def parse_logfile(path: Path) -> _Log:
                     raise InputError(f"POSI: latitude {lat} outside [-90, 90]", where)
                 if not -180.0 <= lon <= 180.0:
                     raise InputError(f"POSI: longitude {lon} outside [-180, 180]", where)
-        rows[tag].append(vals)
+        rows[tag].extend(vals)
         lnos[tag].append(i)
         if not math.isfinite(log.t_first) or vals[0] < log.t_first:
             log.t_first = vals[0]
@@ -223,8 +224,9 @@ def parse_logfile(path: Path) -> _Log:
     epoch = created if math.isfinite(created) else 0.0
     log.t_first += epoch
     for tag in _FIELDS:
-        arr = np.asarray(rows[tag], dtype=np.float64).reshape(len(rows[tag]), -1) if rows[tag] else \
-            np.zeros((0, _KEPT.get(tag, _FIELDS[tag] - 1)))
+        width = _KEPT.get(tag, _FIELDS[tag] - 1)
+        arr = np.frombuffer(rows[tag], dtype=np.float64).reshape(-1, width).copy()
+        rows[tag] = array("d")
         if len(arr):
             arr[:, 0] += epoch
         ln = np.asarray(lnos[tag], dtype=np.int64)
@@ -238,7 +240,8 @@ def parse_logfile(path: Path) -> _Log:
     return log
 
 
-def _ble4(parts: list[str], where: str, text: list[tuple[str, str]]) -> list[float]:
+def _ble4(parts: list[str], where: str, text: list[tuple[str, str]],
+          pairs: dict[tuple[str, str], tuple[str, str]]) -> list[float]:
     """One BLE4 line's (app time, RSSI), its (identity, MAC) appended to ``text``: the identity is an iBeacon's
     ``uuid:major:minor``, "" for an Eddystone. A malformed line -> InputError at ``where``."""
     if parts[-1] == "" and len(parts) > 5:
@@ -258,7 +261,7 @@ def _ble4(parts: list[str], where: str, text: list[tuple[str, str]]) -> list[flo
     if kind == "iBeacon":
         major, minor = (int(_float(v, "BLE4", where)) for v in parts[6:8])
         ident = f"{parts[8].strip()}:{major}:{minor}"
-    text.append((ident, mac))
+    text.append(pairs.setdefault((ident, mac), (ident, mac)))
     return [_float(parts[1], "BLE4", where), _float(parts[4], "BLE4", where)]
 
 

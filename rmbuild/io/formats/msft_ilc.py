@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import gzip
 import io
-import json
 import re
 import zlib
 from collections import Counter
@@ -24,8 +23,11 @@ import pandas as pd
 
 from rmbuild.config.ingest import IngestConfig, MsftIlcConfig
 from rmbuild.errors import InputError
+from rmbuild.io.compressed import read_bytes
 from rmbuild.io.floor_image import attach_image, read_image
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.io.jsonfile import read_json_file
+from rmbuild.limits import MAX_PLAN_BYTES, MAX_PLAN_SIZE_M, MAX_TRACE_BYTES
 from rmbuild.pdr import ImuSignals, accuracy_flags, rotation_vector_quat, yaw_from_quat
 
 FORMAT_NAME = "msft-ilc"
@@ -63,14 +65,8 @@ def _walk_id(p: Path) -> str:
 
 
 def _read_bytes(p: Path) -> bytes:
-    """The whole file (gunzipped when the name ends in .gz); problems -> InputError."""
-    try:
-        raw = p.read_bytes()
-        return gzip.decompress(raw) if p.name.lower().endswith(".gz") else raw
-    except EOFError:
-        raise InputError("gzip data ends early (truncated file)", str(p)) from None
-    except (gzip.BadGzipFile, zlib.error, OSError) as e:
-        raise InputError(f"cannot read gzip data ({e})", str(p)) from None
+    """The whole file (gunzipped when the name ends in .gz), at most MAX_TRACE_BYTES; problems -> InputError."""
+    return read_bytes(p, MAX_TRACE_BYTES, "trace")
 
 
 def _first_lines(p: Path, n: int = 3) -> list[str]:
@@ -80,7 +76,7 @@ def _first_lines(p: Path, n: int = 3) -> list[str]:
         out: list[str] = []
         with opener(p, "rt", encoding="utf-8", errors="replace") as fh:  # type: ignore[operator]
             for _ in range(50):
-                line = fh.readline()
+                line = fh.readline(MAX_LINE_BYTES + 1)
                 if not line:
                     break
                 if line.strip():
@@ -174,108 +170,160 @@ def _numeric(table: np.ndarray, linenos: np.ndarray, path: Path, what: str, dtyp
         raise  # pragma: no cover - the loop always finds the culprit
 
 
+#: lines the fast parser classifies at once, and lines whose bytes it gathers at once: bounds its temporary
+#: arrays (~600 bytes a line) whatever the trace's length
+_FAST_BLOCK_LINES = 1 << 15
+
+
 def _gather(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> bytes:
-    """The bytes ``buf[start[i]:end[i]]`` of every i, concatenated (one gather over those bytes only)."""
+    """The bytes ``buf[start[i]:end[i]]`` of every i, concatenated (gathered a block of lines at a time)."""
     n = end - start
-    idx = np.arange(int(n.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(n) - n), n)
-    return buf[idx].tobytes()
+    out = np.empty(int(n.sum()), dtype=np.uint8)
+    pos = 0
+    for b in range(0, len(start), _FAST_BLOCK_LINES):
+        s, k = start[b:b + _FAST_BLOCK_LINES], n[b:b + _FAST_BLOCK_LINES]
+        m = int(k.sum())
+        idx = np.arange(m, dtype=np.int64) + np.repeat(s - (np.cumsum(k) - k), k)
+        out[pos:pos + m] = buf[idx]
+        pos += m
+    return out.tobytes()
+
+
+def _line_types(buf: np.ndarray, ds: np.ndarray, de: np.ndarray) -> tuple[np.ndarray, list[str], Counter] | None:
+    """Each data line's type (index into the returned names, -1 for a type not in :data:`_USED`) and the
+    count of the skipped types, from lines ``buf[ds[i]:de[i]]``; None when a line is not
+    ``<1-16 digits><TAB>TYPE_...<TAB or end>`` (the slow path then reports it). Works a block of lines at
+    a time."""
+    used = list(_USED)
+    code = np.full(len(ds), -1, dtype=np.int8)
+    skipped: Counter = Counter()
+    width = 64
+    for b in range(0, len(ds), _FAST_BLOCK_LINES):
+        s, e = ds[b:b + _FAST_BLOCK_LINES], de[b:b + _FAST_BLOCK_LINES]
+        # "<digits>\tTYPE_..." : a tab inside the line, 1-16 digits before it, "TYPE_" after it
+        at = s[:, None] + np.arange(MAX_TIME_DIGITS + 1)[None, :]
+        head = np.where(at < e[:, None], buf[np.minimum(at, len(buf) - 1)], 10)
+        del at
+        n_dig = np.argmax(head == 9, axis=1)
+        if not ((head[np.arange(len(s)), n_dig] == 9) & (n_dig > 0)).all():
+            return None
+        if not ((head >= 48) & (head <= 57) | (np.arange(MAX_TIME_DIGITS + 1)[None, :] >= n_dig[:, None])).all():
+            return None
+        tab1 = s + n_dig
+        pos = np.minimum(tab1[:, None] + 1 + np.arange(width)[None, :], len(buf) - 1)
+        key = buf[pos]
+        key = np.where(pos < e[:, None], key, 9)     # pad past the line end with a tab
+        del pos
+        is_tab = key == 9
+        if not is_tab.any(axis=1).all():
+            return None
+        key = np.where(np.arange(width)[None, :] > np.argmax(is_tab, axis=1)[:, None], 0, key)  # the type only
+        if not (key[:, :5] == np.frombuffer(b"TYPE_", np.uint8)).all():
+            return None
+        kv = np.ascontiguousarray(key.astype(np.uint8)).view(np.dtype((np.void, width))).ravel()
+        uniq, inv, counts = np.unique(kv, return_inverse=True, return_counts=True)
+        for j, u in enumerate(uniq):
+            raw = bytes(u)
+            name = raw[: raw.index(b"\t")].decode("ascii", "replace")
+            if name in _USED:
+                code[b + np.flatnonzero(inv == j)] = used.index(name)
+            else:
+                skipped[name] += int(counts[j])
+    return code, used, skipped
 
 
 def _rows_fast(data: bytes) -> tuple[dict[str, _Rows], Counter] | None:
     """Vectorised parse of a well-formed trace; None when anything looks off (the slow path then finds and
     reports the problem with its line number).
 
-    Lines are located and classified with numpy on the raw bytes; the lines of each used type are cut out
-    and handed to pandas' C parser in one block.
+    Lines are located and classified with numpy on the raw bytes, a block of lines at a time; the lines of
+    each used type are cut out and handed to pandas' C parser in one block.
     """
-    text = data.replace(b"\r\n", b"\n")
+    text = data.replace(b"\r\n", b"\n") if b"\r" in data else data
     if not text.endswith(b"\n"):
         text += b"\n"
     buf = np.frombuffer(text, dtype=np.uint8)
     nl = np.flatnonzero(buf == 10)
     starts = np.concatenate(([0], nl[:-1] + 1))
     ends = nl                                     # exclusive end (the newline)
+    del nl
     if (ends - starts).max(initial=0) > MAX_LINE_BYTES:
         return None
     first = buf[starts]
     is_data = (first != ord("#")) & (starts < ends)
+    blank = np.flatnonzero(is_data & np.isin(first, (9, 13, 32)))  # a line of blanks is a blank line
+    if len(blank):
+        is_data[blank[[not bytes(buf[starts[i]:ends[i]]).strip() for i in blank]]] = False
     if not is_data.any():
         return None
     ds, de = starts[is_data], ends[is_data]
     line_no = np.flatnonzero(is_data) + 1
-    tabs = np.flatnonzero(buf == 9)
-    k = np.searchsorted(tabs, ds)
-    if k.max(initial=0) >= len(tabs):
+    del starts, ends, first, is_data
+    typed = _line_types(buf, ds, de)
+    if typed is None:
         return None
-    tab1 = tabs[k]
-    # "<digits>\tTYPE_..." : a tab inside the line, 1-16 digits before it, "TYPE_" after it
-    n_dig = tab1 - ds
-    if not ((tab1 < de) & (n_dig > 0) & (n_dig <= MAX_TIME_DIGITS)).all():
-        return None
-    head = buf[np.minimum(ds[:, None] + np.arange(16)[None, :], len(buf) - 1)]
-    if not ((head >= 48) & (head <= 57) | (np.arange(16)[None, :] >= n_dig[:, None])).all():
-        return None
-    width = 64
-    pos = np.minimum(tab1[:, None] + 1 + np.arange(width)[None, :], len(buf) - 1)
-    key = buf[pos]
-    key = np.where(pos < de[:, None], key, 9)     # pad past the line end with a tab
-    is_tab = key == 9
-    if not is_tab.any(axis=1).all():
-        return None
-    key = np.where(np.arange(width)[None, :] > np.argmax(is_tab, axis=1)[:, None], 0, key)  # the type only
-    if not (key[:, :5] == np.frombuffer(b"TYPE_", np.uint8)).all():
-        return None
-    kv = np.ascontiguousarray(key).view(np.dtype((np.void, width))).ravel()
-    uniq, inv, counts = np.unique(kv, return_inverse=True, return_counts=True)
-    names = []
-    for u in uniq:
-        b = bytes(u)
-        names.append(b[: b.index(b"\t")].decode("ascii", "replace") if b"\t" in b else None)
-    if any(n is None for n in names):
-        return None
+    code, used, skipped = typed
     out: dict[str, _Rows] = {}
-    skipped: Counter = Counter()
-    for j, name in enumerate(names):
-        if name not in _USED:
-            skipped[name] += int(counts[j])
-    for typ, nfields in _USED.items():
+    for typ in _USED:
+        sel = np.flatnonzero(code == used.index(typ))
+        parts = [_parse_block(typ, buf, ds[sel[b:b + _FAST_BLOCK_LINES]], de[sel[b:b + _FAST_BLOCK_LINES]])
+                 for b in range(0, len(sel), _FAST_BLOCK_LINES)]
+        if any(p is None for p in parts):
+            return None
         text_cols = _TEXT_COLS.get(typ, [])
-        js = [j for j, n in enumerate(names) if n == typ]
-        sel = np.isin(inv, js) if js else np.zeros(len(ds), dtype=bool)
-        line = line_no[sel]
-        if len(line) == 0:
+        if not parts:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
-                             np.zeros((0, len(text_cols)), dtype=object), line)
+                             np.zeros((0, len(text_cols)), dtype=object), line_no[sel])
             continue
-        block = _gather(buf, ds[sel], de[sel] + 1)
-        try:
-            df = pd.read_csv(io.BytesIO(block), sep="\t", header=None, names=list(range(nfields)),
-                             dtype={c: str for c in text_cols}, keep_default_na=False, na_values={},
-                             quoting=csv.QUOTE_NONE, engine="c", encoding="utf-8", skip_blank_lines=False)
-            if len(df) != len(line):
-                return None
-            t_ms = df[0].to_numpy(dtype=np.int64)
-            num = df[_NUM_COLS[typ]].to_numpy(dtype=np.float64)
-        except (ValueError, TypeError, OverflowError, pd.errors.ParserError):
-            return None
-        if not np.isfinite(num).all():
-            return None
-        # too few fields: pandas fills the missing ones with "" (text) or NaN (numbers, caught above)
-        if text_cols and (df[text_cols[-1]].to_numpy(dtype=object) == "").any() and nfields - 1 in text_cols:
-            return None
-        # text as Python strings: a fixed-width numpy string array would be as wide as the longest cell
-        txt = df[text_cols].to_numpy(dtype=object) if text_cols else np.zeros((len(df), 0), dtype=object)
-        out[typ] = _Rows(t_ms, num, txt, line)
+        t_ms, num, txt = (np.concatenate([p[k] for p in parts if p is not None]) for k in range(3))
+        out[typ] = _Rows(t_ms, num, txt, line_no[sel])
     return out, skipped
 
 
+def _parse_block(typ: str, buf: np.ndarray, ds: np.ndarray, de: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Lines ``buf[ds[i]:de[i]]`` of one used type through pandas' C parser: (unix ms, numeric fields, text
+    fields), None when a line does not parse cleanly."""
+    nfields = _USED[typ]
+    text_cols = _TEXT_COLS.get(typ, [])
+    block = _gather(buf, ds, de + 1)
+    try:
+        df = pd.read_csv(io.BytesIO(block), sep="\t", header=None, names=list(range(nfields)),
+                         dtype={c: "category" for c in text_cols}, keep_default_na=False, na_values={},
+                         quoting=csv.QUOTE_NONE, engine="c", encoding="utf-8", skip_blank_lines=False)
+        if len(df) != len(ds):
+            return None
+        t_ms = df[0].to_numpy(dtype=np.int64)
+        num = df[_NUM_COLS[typ]].to_numpy(dtype=np.float64)
+    except (ValueError, TypeError, OverflowError, pd.errors.ParserError):
+        return None
+    if not np.isfinite(num).all():
+        return None
+    # too few fields: pandas fills the missing ones with "" (text) or NaN (numbers, caught above)
+    if text_cols and nfields - 1 in text_cols and (df[text_cols[-1]] == "").any():
+        return None
+    # text as Python strings (a fixed-width numpy string array would be as wide as the longest cell), one
+    # object per distinct value (read as categories: a scan's SSIDs and BSSIDs repeat in every scan)
+    txt = np.column_stack([_shared_text(df[c]) for c in text_cols]) if text_cols else \
+        np.zeros((len(df), 0), dtype=object)
+    return t_ms, num, txt
+
+
+def _shared_text(col: pd.Series) -> np.ndarray:
+    """A categorical column as an object array holding one str per category (not one per row)."""
+    cats = np.array([str(v) for v in col.cat.categories], dtype=object)
+    codes = col.cat.codes.to_numpy()
+    return cats[codes] if len(cats) else np.full(len(col), "", dtype=object)
+
+
 def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
-    """Line-by-line parse with exact error messages (file:line)."""
-    rows: dict[str, list[list[str]]] = {k: [] for k in _USED}
+    """Line-by-line parse with exact error messages (file:line). Keeps each used line as it is (one string)
+    and splits them a block at a time at the end: memory of the order of the text's."""
+    rows: dict[str, list[str]] = {k: [] for k in _USED}
     lnos: dict[str, list[int]] = {k: [] for k in _USED}
     skipped: Counter = Counter()
-    for i, line in enumerate(text.split("\n"), 1):
-        line = line.rstrip("\r")
+    for i, line in enumerate(io.StringIO(text, newline="\n"), 1):
+        line = line.rstrip("\n").rstrip("\r")
         if len(line) > MAX_LINE_BYTES:
             raise InputError(f"line of {len(line):,} characters (a trace line has at most a few hundred; the "
                              f"limit is {MAX_LINE_BYTES:,})", f"{path}:{i}")
@@ -299,7 +347,7 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
         if len(parts) != _USED[typ]:
             raise InputError(f"{typ}: expected {_USED[typ]} tab-separated fields, got {len(parts)}",
                              f"{path}:{i}")
-        bucket.append(parts)
+        bucket.append(line)
         lnos[typ].append(i)
     if not any(rows.values()) and not skipped:
         raise InputError("no data lines (empty or header-only trace)", str(path))
@@ -311,10 +359,14 @@ def _rows_slow(text: str, path: Path) -> tuple[dict[str, _Rows], Counter]:
             out[typ] = _Rows(np.zeros(0, dtype=np.int64), np.zeros((0, len(_NUM_COLS[typ]))),
                              np.zeros((0, len(text_cols)), dtype=object), ln)
             continue
-        tab = np.array(rows[typ], dtype=object)
-        t_ms = _numeric(tab[:, :1], ln, path, typ, np.int64)[:, 0]
-        num = _numeric(tab[:, _NUM_COLS[typ]], ln, path, typ)
-        out[typ] = _Rows(t_ms, num, tab[:, text_cols], ln)
+        blocks = []
+        for b in range(0, len(ln), _FAST_BLOCK_LINES):
+            tab = np.array([r.split("\t") for r in rows[typ][b:b + _FAST_BLOCK_LINES]], dtype=object)
+            blocks.append((_numeric(tab[:, :1], ln[b:], path, typ, np.int64)[:, 0],
+                          _numeric(tab[:, _NUM_COLS[typ]], ln[b:], path, typ), tab[:, text_cols]))
+        rows[typ] = []
+        t_ms, num, txt = (np.concatenate([p[k] for p in blocks]) for k in range(3))
+        out[typ] = _Rows(t_ms, num, txt, ln)
     return out, skipped
 
 
@@ -328,9 +380,12 @@ def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
     """Parse one trace file into time-sorted series and tables (no PDR yet)."""
     raw = _read_bytes(path)
     try:
-        text = raw.decode("utf-8")
+        raw.decode("utf-8")  # checked once; the slow path decodes again
     except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text (byte {e.start})", str(path)) from None
+        line_start = raw.rfind(b"\n", 0, e.start) + 1
+        line_no = raw.count(b"\n", 0, e.start) + 1
+        raise InputError(f"not UTF-8 text (byte {e.start - line_start + 1} of the line: {e.reason})",
+                         f"{path}:{line_no}") from None
     device = floor = site = ""
     for h in _HEADER_RE.findall(raw[:20000]):
         hs = h.decode("utf-8", "replace")
@@ -344,7 +399,8 @@ def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
         if m:
             floor = m.group(1).strip()
     fast = _rows_fast(raw)
-    rows, skipped = fast if fast is not None else _rows_slow(text, path)
+    rows, skipped = fast if fast is not None else _rows_slow(raw.decode("utf-8"), path)
+    del raw, fast
     wid = _walk_id(path)
 
     acc = _stream(rows["TYPE_ACCELEROMETER"], 3, True)
@@ -357,7 +413,7 @@ def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
 
     w = rows["TYPE_WIFI"]
     n_stale = 0
-    bssid = np.array([str(b).strip().lower() for b in w.text[:, 1]], dtype=object)
+    bssid = _normalised(w.text[:, 1])
     empty = np.flatnonzero(bssid == "")
     if len(empty):
         raise InputError("TYPE_WIFI: empty BSSID", f"{path}:{w.line[empty[0]]}")
@@ -367,7 +423,7 @@ def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
     # one reading per (scan time, BSSID): phones list a BSSID twice when it is heard on two channels;
     # keep the row seen most recently
     if len(idx):
-        order = np.lexsort((-w.num[idx, 2], bssid[idx], w.t_ms[idx]))
+        order = np.lexsort((-w.num[idx, 2], pd.factorize(bssid[idx])[0], w.t_ms[idx]))
         idx = idx[order]
         key_t, key_b = w.t_ms[idx], bssid[idx]
         first = np.r_[True, (key_t[1:] != key_t[:-1]) | (key_b[1:] != key_b[:-1])]
@@ -394,11 +450,18 @@ def parse_trace(path: Path, opts: MsftIlcConfig) -> _Trace:
                   n_dup, site, ble, ble_lines, n_ble_dup)
 
 
+def _normalised(ids: np.ndarray) -> np.ndarray:
+    """MAC addresses as text, stripped and in lower case: one string per distinct value (object array)."""
+    codes, uniq = pd.factorize(ids, use_na_sentinel=False)
+    norm = np.array([str(v).strip().lower() for v in uniq], dtype=object)
+    return norm[codes] if len(norm) else np.zeros(len(ids), dtype=object)
+
+
 def _beacons(b: _Rows, wid: str, path: Path) -> tuple[pd.DataFrame, np.ndarray, int]:
     """TYPE_BEACON rows as BLE readings in time order: bssid = the beacon's MAC (lower case), ssid = its
     iBeacon ``uuid:major:minor``; a repeated (time, MAC) keeps its first row. Returns the readings, their
     lines and the number of repeats dropped."""
-    mac = np.array([str(m).strip().lower() for m in b.text[:, 1]], dtype=object)
+    mac = _normalised(b.text[:, 1])
     empty = np.flatnonzero(mac == "")
     if len(empty):
         raise InputError("TYPE_BEACON: empty MAC address", f"{path}:{b.line[empty[0]]}")
@@ -430,16 +493,31 @@ def _floor_plans(files: list[Path]) -> dict[str, dict]:
     for folder, byname in folders.items():
         if not {"geojson_map.json", "floor_info.json"} <= set(byname):
             continue
+        w, h = _floor_size(byname["floor_info.json"])
+        doc = read_json_file(byname["geojson_map.json"], MAX_PLAN_BYTES, "floor plan")
         try:
-            info = json.loads(byname["floor_info.json"].read_text())["map_info"]
-            doc = json.loads(byname["geojson_map.json"].read_text())
-            w, h = float(info["width"]), float(info["height"])
             out[folder.name] = to_geojson(from_ilc(doc, w, h, folder.name))
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
             raise InputError(f"unreadable floor plan: {str(e)[:200]}", str(byname["geojson_map.json"])) from None
         if "floor_image.png" in byname:
             out[folder.name] = attach_image(out[folder.name], read_image(byname["floor_image.png"]), [0.0, 0.0, w, h])
     return out
+
+
+def _floor_size(path: Path) -> tuple[float, float]:
+    """``floor_info.json``'s ``map_info`` width and height (m): numbers in (0, MAX_PLAN_SIZE_M]."""
+    info = read_json_file(path, 1 << 20, "floor_info.json")
+    m = info.get("map_info") if isinstance(info, dict) else None
+    if not isinstance(m, dict):
+        raise InputError('no "map_info" object with "width" and "height"', str(path))
+    out = []
+    for k in ("width", "height"):
+        v = m.get(k)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= MAX_PLAN_SIZE_M:
+            raise InputError(f'map_info "{k}" must be a number of metres in (0, {MAX_PLAN_SIZE_M:g}], got '
+                             f"{str(v)[:40]}", str(path))
+        out.append(float(v))
+    return out[0], out[1]
 
 
 def _trace_floor(tr: _Trace, path: Path) -> str:

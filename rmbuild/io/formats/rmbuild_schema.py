@@ -11,7 +11,6 @@ import csv
 import difflib
 import gzip
 import io
-import json
 import math
 import os
 import re
@@ -26,7 +25,10 @@ import pyarrow as pa
 
 from rmbuild.config.ingest import IngestConfig
 from rmbuild.errors import InputError, one_line
+from rmbuild.io.compressed import ExpandsTooFar, open_binary
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
+from rmbuild.io.jsonfile import read_json_file
+from rmbuild.limits import MAX_PARQUET_CELLS
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "ble", "fixes", "imu")
@@ -92,6 +94,8 @@ def _table_of(p: Path) -> str | None:
 
 #: columns; no table of the schema (nor a truth table) has more than a dozen
 MAX_COLUMNS = 1000
+#: bytes of truth/venue.json (simulate writes a few kB)
+MAX_VENUE_BYTES = 64 * 2**20
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
 _ARROW_STR = pd.ArrowDtype(pa.string())
 #: bytes per chunk of the scan for fields starting with a space (bounded memory on any file size)
@@ -125,8 +129,7 @@ class _Located:
 
 
 def _open_text(path: Path) -> io.TextIOBase:
-    raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
-    return io.TextIOWrapper(raw, encoding="utf-8", errors="replace", newline="")
+    return io.TextIOWrapper(open_binary(path), encoding="utf-8", errors="replace", newline="")
 
 
 def _record_lines(path: Path) -> list[int]:
@@ -149,14 +152,13 @@ def _record_lines(path: Path) -> list[int]:
 def _bad_utf8_line(path: Path) -> str:
     """'line N' of the first line that is not UTF-8 ('' when it cannot be told)."""
     try:
-        raw = gzip.open(path, "rb") if str(path).lower().endswith(".gz") else path.open("rb")
-        with raw:
+        with open_binary(path) as raw:
             for n, line in enumerate(raw, 1):
                 try:
                     line.decode("utf-8")
                 except UnicodeDecodeError as e:
                     return f"{n}: byte {e.start + 1} of the line"
-    except (OSError, EOFError, zlib.error):
+    except (OSError, EOFError, zlib.error, ExpandsTooFar):
         pass
     return ""
 
@@ -183,6 +185,13 @@ def _check_width(path: Path) -> None:
 
 def _long_record(path: Path) -> tuple[str, str]:
     """(problem, where) of the first record with more fields than the header."""
+    try:
+        return _first_long_record(path)
+    except ExpandsTooFar as e:
+        return e.input_error().problem, str(path)
+
+
+def _first_long_record(path: Path) -> tuple[str, str]:
     csv.field_size_limit(max(csv.field_size_limit(), 1 << 31))
     with _open_text(path) as fh:
         reader = csv.reader(fh, skipinitialspace=True)
@@ -224,17 +233,19 @@ def read_located(path: Path, required: dict[str, str] | None = None,
 def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame:
     try:
         if _suffix(path) == ".parquet":
+            _check_parquet_size(path)
             return pd.read_parquet(path)
         _check_width(path)
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), open_binary(path) as source:  # .gz: gunzipped, at most MAX_GUNZIP_BYTES
             # a first data row longer than the header: pandas would make an index of it, or drop cells
             warnings.simplefilter("error", pd.errors.ParserWarning)
             if schema is None:
-                return pd.read_csv(path, skipinitialspace=True, keep_default_na=True, na_values=[""],
-                                   index_col=False)
+                return pd.read_csv(source, skipinitialspace=True, keep_default_na=True, na_values=[""],
+                                   index_col=False, compression=None)
             strs = [c for c, k in schema.items() if k == "str"]
             # read as Arrow strings (as fast as no dtype; dtype=str was 2x slower), then the usual str dtype
-            df = pd.read_csv(path, skipinitialspace=_has_initial_space(path), dtype={c: _ARROW_STR for c in strs},
+            df = pd.read_csv(source, skipinitialspace=_has_initial_space(path), dtype={c: _ARROW_STR for c in strs},
+                             compression=None,
                              keep_default_na=False, na_values={c: NUMERIC_NA for c, k in schema.items() if k != "str"},
                              index_col=False)
             for c in strs:
@@ -243,6 +254,8 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
             return df
     except InputError:
         raise
+    except ExpandsTooFar as e:
+        raise e.input_error() from None
     except pd.errors.ParserWarning:
         raise InputError(*_long_record(path)) from None
     except pd.errors.EmptyDataError:
@@ -264,6 +277,17 @@ def _read_file(path: Path, schema: dict[str, str] | None = None) -> pd.DataFrame
         raise InputError("file too large to read into memory", str(path)) from None
     except Exception as e:  # pyarrow raises ArrowInvalid and friends for corrupt Parquet
         raise InputError(f"unreadable Parquet ({type(e).__name__}: {e})", str(path)) from None
+
+
+def _check_parquet_size(path: Path) -> None:
+    """A Parquet table holds at most :data:`MAX_PARQUET_CELLS` cells (rows × columns, from its footer, before
+    any data is decoded: a few KB of run-length-encoded constants can decode to GBs)."""
+    import pyarrow.parquet as pq
+
+    md = pq.ParquetFile(path).metadata
+    if md.num_rows * max(md.num_columns, 1) > MAX_PARQUET_CELLS:
+        raise InputError(f"{md.num_rows:,} rows x {md.num_columns} columns: at most {MAX_PARQUET_CELLS:,} cells in "
+                         "a Parquet input table (split it into several files of the table)", str(path))
 
 
 def _as_stored(df: pd.DataFrame) -> pd.DataFrame:
@@ -533,10 +557,7 @@ class RmbuildSchemaReader(Reader):
             if t == "truth/provenance":
                 continue
             if t == "truth/venue":
-                try:
-                    raw.venue = json.loads(fs[0].read_text())
-                except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
-                    raise InputError(f"invalid JSON ({e})", str(fs[0])) from None
+                raw.venue = read_json_file(fs[0], MAX_VENUE_BYTES, "venue.json")
             elif t.startswith("truth/") and t != "truth/poses":
                 name = t.removeprefix("truth/")
                 df = pd.concat([_as_stored(_read_file(f)) for f in fs], ignore_index=True)

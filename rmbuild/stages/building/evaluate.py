@@ -41,8 +41,8 @@ def run_building(workspace: str | Path, floors: dict[str, Path], cfg: EvaluateCo
             report, tables[name] = fn(path)
         except ConfigError:
             raise
-        except InputError as e:
-            skipped[name] = str(e)
+        except InputError as e:  # said of the floor's workspace: the floor's name says that here
+            skipped[name] = e.problem if e.where == str(path) else str(e)
             return {}
         return report
 

@@ -10,7 +10,10 @@ built with and the floor task's result. A re-run of `build` without ``--force``:
 - skips a floor whose stage configs are the same and whose outputs are complete: every stage's record
   matches its files and the records it read (:meth:`Workspace.verify`, :meth:`Workspace.stale_inputs`);
 - when the inputs changed, ingests again, and keeps the outputs of every floor whose ingested data came
-  out byte-identical (:func:`keeping_unchanged_floors`): a changed file of one floor re-runs that floor.
+  out byte-identical (:func:`keeping_unchanged_floors`): a changed file of one floor re-runs that floor;
+- never replaces a stage a user re-made by hand since (``export-map --cell-size 5``, ``optimize --anchors``,
+  ``ingest --append``): the state holds each floor's stage records as the build left them, and a floor whose
+  records differ is refused, naming what differs (:func:`hand_made`), unless ``--force``.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -27,7 +31,7 @@ from rmbuild import __version__
 from rmbuild.errors import WorkspaceError
 from rmbuild.io.atomic import replacing_dir, write_json_atomic
 from rmbuild.io.lock import workspace_lock
-from rmbuild.io.workspace import Workspace, building_floors, sha256_file
+from rmbuild.io.workspace import STAGE_DIRS, Workspace, building_floors, record_digests, sha256_file
 
 #: the floor-task stages whose records a complete floor has ("evaluate" too when its result has it)
 FLOOR_STAGES = ("optimize", "map")
@@ -40,7 +44,7 @@ def read_state(workspace: str | Path) -> dict | None:
     p = Workspace(workspace).path("build.state")
     try:
         s = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     ok = isinstance(s, dict) and s.get("version") == STATE_VERSION and isinstance(s.get("floors"), dict)
     return s if ok else None
@@ -98,7 +102,10 @@ def keeping_unchanged_floors(workspace: str | Path, state: dict | None) -> Itera
     them. A kill leaves ``.<name>.keep-<pid>`` beside the workspace, removed by the next run."""
     root = Path(workspace).resolve()
     for left in root.parent.glob(f".{root.name}.keep-*"):
-        shutil.rmtree(left, ignore_errors=True)
+        if left.is_symlink():  # not ours: removed, never followed
+            left.unlink()
+        else:
+            shutil.rmtree(left, ignore_errors=True)
     kept: set[str] = set()
     old = building_floors(root) if state else None
     done = {n for n, e in (state or {}).get("floors", {}).items() if (e.get("result") or {}).get("ok")}
@@ -150,3 +157,62 @@ def _input_files(inputs: list[str | Path]) -> list[tuple[str, Path]]:
             out.append((f"{i}:{p.name}", p))
     return out
 
+
+
+def stage_records(path: str | Path) -> dict[str, str]:
+    """{stage: sha256 of its record} of a floor's workspace, for the stages it has (what the build leaves)."""
+    return record_digests(path)
+
+
+#: stage -> the config section its config.toml holds that the build sets
+_SECTION = {"ingest": "ingest", "optimize": "optimize", "map": "map", "evaluate": "evaluate"}
+
+
+def hand_made(workspace: str | Path, state: dict) -> list[str]:
+    """One line per floor of the build ``state`` whose stages were re-made since the build left them (their
+    records changed): the stages and what differs from the build's config (or that the config is the same:
+    other options, such as --anchors, or another input). Floors the state has no records of are skipped."""
+    floors = building_floors(workspace) or {Path(workspace).name: Path(workspace)}
+    out = []
+    for name, entry in state.get("floors", {}).items():
+        recorded = entry.get("records") if isinstance(entry, dict) else None
+        if not isinstance(recorded, dict) or name not in floors:
+            continue
+        now = stage_records(floors[name])
+        changed = [s for s in STAGE_DIRS if now.get(s) != recorded.get(s)]
+        if not changed:
+            continue
+        build_cfg = {**(entry.get("configs") or {}),
+                     "ingest": ((state.get("inputs") or {}).get("settings") or {}).get("ingest", "")}
+        what = []
+        for stage in changed:
+            diff = _config_diff(Workspace(floors[name]).path(f"{STAGE_DIRS[stage]}.config"), build_cfg.get(
+                _SECTION[stage], ""), _SECTION[stage]) if stage in now else "removed"
+            what.append(f"{stage} ({diff})")
+        label = f"floor {name}" if building_floors(workspace) is not None else str(workspace)
+        out.append(f"{label}: {', '.join(what)} made by hand since the last build")
+    return out
+
+
+def _config_diff(path: Path, build_text: str, section: str) -> str:
+    """What the config a stage ran with (``path``) sets otherwise than the build's (``build_text``)."""
+    try:
+        mine = _flat(tomllib.loads(path.read_text()).get(section, {}))
+        theirs = _flat(tomllib.loads(build_text).get(section, {}))
+    except (OSError, ValueError, RecursionError):
+        return "its config unreadable"
+    keys = [k for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
+    if not keys:
+        return "same config: other options or inputs"
+    shown = ", ".join(f"{section}.{k} = {mine.get(k)!r} (build: {theirs.get(k)!r})" for k in keys[:3])
+    return shown + (f" and {len(keys) - 3} more" if len(keys) > 3 else "")
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out: dict = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
