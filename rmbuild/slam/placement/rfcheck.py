@@ -229,7 +229,7 @@ class OverlapCheck:
         hits = tree.query_ball_point(xy[rw], NEAR_M)  # each scan's neighbours, ascending
         counts = np.fromiter((len(h) for h in hits), np.int64, len(hits))
         row = np.repeat(rw, counts)
-        col = np.fromiter((c for h in hits for c in h), np.int64, int(counts.sum()))
+        col = np.concatenate([np.asarray(h, np.int64) for h in hits]) if len(hits) else np.zeros(0, np.int64)
         keep = ok_row[col]
         row, col = row[keep], col[keep]
         keep = np.linalg.norm(xy[col] - xy[row], axis=1) < NEAR_M
