@@ -67,6 +67,7 @@ def prepare(sizes: list[int]) -> dict:
     from bench.bench_optimize import _load, _subset
     from rmbuild.io.workspace import Workspace, write_dataset
 
+    SCRATCH.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     ds, fp = _load(PRESET, SEED)
     out = {"simulate_ingest_s": round(time.perf_counter() - t0, 1), "poses": len(ds.poses), "walks": len(ds.walks)}
