@@ -33,6 +33,21 @@ def _loc(d: dict, case: str, name: str, key: str = "mean") -> Any:
     return d["cases"][case]["localizers"][name][key]
 
 
+def _knn_rounds(d: dict) -> str:
+    k = d["knn"]
+    loads = k.get("load_per_round") or [d["machine"].get("load_1min", float("nan"))]
+    return (f"(median of {k.get('rounds', '?')} interleaved rounds, "
+            f"{'stable' if k.get('stable', False) else 'not stable'}; load {min(loads):.1f}-{max(loads):.1f})")
+
+
+def _knn_faiss(d: dict) -> str:
+    f, c = d["knn"].get("faiss"), d["knn"]["one_thread_cpu"]
+    if not isinstance(f, dict):
+        return str(f or "not run")
+    return (f"{f['speedup_batch']:.2f}× / {f['speedup_one_at_a_time']:.2f}× {_knn_rounds(d)}; CPU "
+            f"{c.get('vs_faiss_batch', float('nan')):.2f}× / {c.get('vs_faiss_one_at_a_time', float('nan')):.2f}×")
+
+
 def _month_case(c: dict) -> str:
     load = f" at load {c['load_at_start']:.0f}" if "load_at_start" in c else ""
     if c["status"] != "ok":
@@ -75,8 +90,10 @@ ROWS: list[Row] = [
     Row("map", "kNN one query at a time vs scikit-learn brute force, CPU time, one thread each",
         lambda d: d["knn"]["one_thread_cpu"]["speedup_one_at_a_time"], "×", "≥ 10", lambda v: v >= 10.0),
     Row("map", "kNN batch / one at a time vs scikit-learn, wall clock (swings with the machine's load)",
-        lambda d: f"{d['knn']['speedup_batch']:.2f}× / {d['knn']['speedup_one_at_a_time']:.1f}× at load "
-                  f"{d['machine'].get('load_1min', '?')}", ""),
+        lambda d: f"{d['knn']['speedup_batch']:.2f}× / {d['knn']['speedup_one_at_a_time']:.1f}× "
+                  f"{_knn_rounds(d)}", ""),
+    Row("map", "kNN batch / one at a time vs faiss IndexFlatL2 (exact), wall clock; CPU time, one thread each",
+        _knn_faiss, ""),
     Row("map", "kNN neighbour sets differing from float64 brute force other than at exact ties",
         lambda d: d["knn"]["differing_sets_not_ties"], "", "0", lambda v: v == 0),
     Row("map", "export-map `large` (tables, figures, writes)", lambda d: d["export_map"]["total_s"], "s"),
