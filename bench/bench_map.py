@@ -1,5 +1,7 @@
-"""kNN throughput on >= 5,000 reference points vs scikit-learn's brute-force KNeighborsRegressor (5 interleaved
-repetitions, median rates), and export-map time on the `large` preset. Writes bench/results/map.json.
+"""kNN throughput on >= 5,000 reference points vs scikit-learn's brute-force KNeighborsRegressor and faiss's exact
+IndexFlatL2 (when installed: ``pip install 'rmbuild[bench]'``), interleaved rounds repeated until every ratio is
+stable, the machine's load stated per round; and export-map time on the `large` preset. Writes
+bench/results/map.json.
 
 The map is built from the `large` preset's true positions (the RP set is the map nodes' fingerprint
 database: every map node with readings); queries are the test walks' scans. Both methods see the same
@@ -10,6 +12,7 @@ brute force: a neighbour set that differs from scikit-learn's is counted as a ti
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 import time
@@ -60,16 +63,57 @@ def _cpu(f, reps: int) -> float:
     return float(np.median(out))
 
 
-def _cpu_one_thread(ours, sk, q: np.ndarray, xq: np.ndarray, ns: int, reps: int) -> dict:
-    """CPU time of both sides on one thread each: every BLAS / OpenMP pool at one thread, and our batch's
-    worker threads (``knn_search.THREADS``) too — the work each does, which other jobs on the machine hardly
-    change (wall-clock ratios swing with load: scikit-learn's thread pools slow most when the cores are busy).
-    Our batch with its default two workers is timed beside it (``ours_batch_two_workers``: the two threads'
-    CPU time together)."""
+#: repetitions of the interleaved timings: at least MIN_ROUNDS, then until the median ratios of the last
+#: STABLE_ROUNDS rounds differ by less than STABLE_REL (relative), at most MAX_ROUNDS
+MIN_ROUNDS = 5
+STABLE_ROUNDS = 3
+STABLE_REL = 0.03
+MAX_ROUNDS = 30
+
+
+def _faiss():
+    """faiss (the optional bench dependency ``rmbuild[bench]``), or None when it is not installed."""
+    try:
+        import faiss
+    except ImportError:
+        return None
+    return faiss
+
+
+def _until_stable(methods: dict, ratios: dict) -> dict:
+    """Time every method once per round, interleaved, until each ratio's running median is stable (module
+    constants); ``ratios``: name -> (numerator method, denominator method). Returns the per-round seconds and
+    load, the median ratios and how many rounds it took."""
+    runs: dict[str, list[float]] = {n: [] for n in methods}
+    loads: list[float] = []
+    medians: dict[str, list[float]] = {r: [] for r in ratios}
+    for rnd in range(1, MAX_ROUNDS + 1):
+        loads.append(os.getloadavg()[0])
+        for name, f in methods.items():
+            runs[name] += _timed(f, 1)
+        for r, (a, b) in ratios.items():
+            medians[r].append(float(np.median(np.array(runs[a]) / np.array(runs[b]))))
+        last = {r: m[-STABLE_ROUNDS:] for r, m in medians.items()}
+        if rnd >= MIN_ROUNDS and all(max(v) - min(v) <= STABLE_REL * float(np.median(v)) for v in last.values()):
+            break
+    return {"rounds": rnd, "stable": rnd < MAX_ROUNDS, "load_per_round": [round(v, 2) for v in loads],
+            "seconds": {n: [round(v, 5) for v in t] for n, t in runs.items()},
+            "ratio": {r: round(m[-1], 2) for r, m in medians.items()},
+            "ratio_each_round": {r: [round(float(a / b), 2) for a, b in zip(runs[ratios[r][0]], runs[ratios[r][1]])]
+                                 for r in ratios}}
+
+
+def _cpu_one_thread(ours, sk, fa, q: np.ndarray, xq: np.ndarray, ns: int, reps: int, k: int) -> dict:
+    """CPU time of every side on one thread each: every BLAS / OpenMP pool at one thread (faiss's too), and our
+    batch's worker threads (``knn_search.THREADS``) too — the work each does, which other jobs on the machine
+    hardly change (wall-clock ratios swing with load: scikit-learn's thread pools slow most when the cores are
+    busy). Our batch with its default two workers is timed beside it (``ours_batch_two_workers``: the two
+    threads' CPU time together)."""
     from threadpoolctl import threadpool_limits
 
     from rmbuild.localize import knn_search
 
+    xq32 = xq.astype(np.float32)
     with threadpool_limits(1):
         workers = knn_search.THREADS
         t = {"ours_batch_two_workers": _cpu(lambda: ours.predict_rss(q), reps)}
@@ -79,17 +123,27 @@ def _cpu_one_thread(ours, sk, q: np.ndarray, xq: np.ndarray, ns: int, reps: int)
                       "sklearn_batch": _cpu(lambda: sk.predict(xq), reps),
                       "ours_single": _cpu(lambda: [ours.predict_rss(q[i:i + 1]) for i in range(ns)], reps),
                       "sklearn_single": _cpu(lambda: [sk.predict(xq[i:i + 1]) for i in range(ns)], reps)})
+            if fa is not None:
+                faiss, index = fa
+                faiss.omp_set_num_threads(1)
+                t.update({"faiss_batch": _cpu(lambda: index.search(xq32, k), reps),
+                          "faiss_single": _cpu(lambda: [index.search(xq32[i:i + 1], k) for i in range(ns)], reps)})
         finally:
             knn_search.THREADS = workers
-    return {"speedup_batch": round(t["sklearn_batch"] / t["ours_batch"], 2),
-            "speedup_batch_two_workers": round(t["sklearn_batch"] / t["ours_batch_two_workers"], 2),
-            "speedup_one_at_a_time": round(t["sklearn_single"] / t["ours_single"], 2),
-            "cpu_s": {k: round(v, 4) for k, v in t.items()}}
+    out = {"speedup_batch": round(t["sklearn_batch"] / t["ours_batch"], 2),
+           "speedup_batch_two_workers": round(t["sklearn_batch"] / t["ours_batch_two_workers"], 2),
+           "speedup_one_at_a_time": round(t["sklearn_single"] / t["ours_single"], 2),
+           "cpu_s": {k2: round(v, 4) for k2, v in t.items()}}
+    if fa is not None:
+        out["vs_faiss_batch"] = round(t["faiss_batch"] / t["ours_batch"], 2)
+        out["vs_faiss_one_at_a_time"] = round(t["faiss_single"] / t["ours_single"], 2)
+    return out
 
 
 def knn_bench(rm, q: np.ndarray, k: int = 15, n_single: int = 300, reps: int = 5) -> dict:
-    """Our kNN against scikit-learn's brute force on the map's node RPs (>= 5,000): batch and one query at
-    a time, ``reps`` interleaved repetitions, median rates; neighbour sets compared with ties resolved."""
+    """Our kNN against scikit-learn's brute force and faiss's exact IndexFlatL2 (when installed) on the map's
+    node RPs (>= 5,000): batch and one query at a time, interleaved rounds repeated until the ratios are stable
+    (:func:`_until_stable`), with the load of each round; neighbour sets compared with ties resolved."""
     from sklearn.neighbors import KNeighborsRegressor
 
     from rmbuild.localize.knn import KnnLocalizer
@@ -104,18 +158,27 @@ def knn_bench(rm, q: np.ndarray, k: int = 15, n_single: int = 300, reps: int = 5
     sk = KNeighborsRegressor(n_neighbors=k, algorithm="brute").fit(xr, ref.xy)
     sk32 = KNeighborsRegressor(n_neighbors=k, algorithm="brute").fit(xr.astype(np.float32), ref.xy)
     xq32 = xq.astype(np.float32)
+    faiss = _faiss()
+    fa = None
+    if faiss is not None:
+        index = faiss.IndexFlatL2(xr.shape[1])
+        index.add(xr.astype(np.float32))
+        fa = (faiss, index)
     ours.predict_rss(q[:50])  # warm-up
     sk.predict(xq[:50])
     ns = min(n_single, len(q))
-    runs: dict[str, list[float]] = {n: [] for n in ("ours_batch", "sklearn_batch", "sklearn_batch_float32",
-                                                     "ours_single", "sklearn_single")}
-    for _ in range(reps):
-        runs["ours_batch"] += _timed(lambda: ours.predict_rss(q), 1)
-        runs["sklearn_batch"] += _timed(lambda: sk.predict(xq), 1)
-        runs["sklearn_batch_float32"] += _timed(lambda: sk32.predict(xq32), 1)
-        runs["ours_single"] += _timed(lambda: [ours.predict_rss(q[i:i + 1]) for i in range(ns)], 1)
-        runs["sklearn_single"] += _timed(lambda: [sk.predict(xq[i:i + 1]) for i in range(ns)], 1)
-    t = {n: float(np.median(v)) for n, v in runs.items()}
+    methods = {"ours_batch": lambda: ours.predict_rss(q), "sklearn_batch": lambda: sk.predict(xq),
+               "sklearn_batch_float32": lambda: sk32.predict(xq32),
+               "ours_single": lambda: [ours.predict_rss(q[i:i + 1]) for i in range(ns)],
+               "sklearn_single": lambda: [sk.predict(xq[i:i + 1]) for i in range(ns)]}
+    ratios = {"batch": ("sklearn_batch", "ours_batch"), "one_at_a_time": ("sklearn_single", "ours_single")}
+    if fa is not None:
+        methods["faiss_batch"] = lambda: index.search(xq32, k)
+        methods["faiss_single"] = lambda: [index.search(xq32[i:i + 1], k) for i in range(ns)]
+        ratios.update({"faiss_batch": ("faiss_batch", "ours_batch"), "faiss_one_at_a_time": ("faiss_single",
+                                                                                           "ours_single")})
+    timing = _until_stable(methods, ratios)
+    t = {n: float(np.median(v)) for n, v in timing["seconds"].items()}
     p_ours, p_sk = ours.predict_rss(q), sk.predict(xq)
     _, i_ours = ours.kneighbors(q)
     d_sk, i_sk = sk.kneighbors(xq)
@@ -125,22 +188,22 @@ def knn_bench(rm, q: np.ndarray, k: int = 15, n_single: int = 300, reps: int = 5
     kth = np.sort(np.partition(d_all, k, axis=1)[:, :k + 1], axis=1)[:, k - 1:k + 1]
     tied = kth[:, 0] == kth[:, 1]
     ok = np.all(np.take_along_axis(d_all, i_ours, axis=1) <= kth[:, :1], axis=1)
-    return {
+    out = {
         "reference_points": int(len(ref)), "reference_kind": ref.kind, "aps": int(ref.rss_dbm.shape[1]),
-        "queries": int(len(q)), "k": k, "single_queries": ns, "repetitions": reps, "fit_s": round(fit_s, 3),
-        "queries_per_s": {
-            "ours_batch": _rate(len(q), t["ours_batch"]),
-            "sklearn_brute_batch": _rate(len(q), t["sklearn_batch"]),
-            "sklearn_brute_batch_float32": _rate(len(q), t["sklearn_batch_float32"]),
-            "ours_one_at_a_time": _rate(ns, t["ours_single"]),
-            "sklearn_brute_one_at_a_time": _rate(ns, t["sklearn_single"]),
-        },
-        "speedup_batch": round(t["sklearn_batch"] / t["ours_batch"], 2),
-        "speedup_batch_each_run": [round(a / b, 2) for a, b in zip(runs["sklearn_batch"], runs["ours_batch"])],
-        "speedup_one_at_a_time": round(t["sklearn_single"] / t["ours_single"], 2),
-        "speedup_one_at_a_time_each_run": [round(a / b, 2)
-                                           for a, b in zip(runs["sklearn_single"], runs["ours_single"])],
-        "one_thread_cpu": _cpu_one_thread(ours, sk, q, xq, ns, 5),
+        "queries": int(len(q)), "k": k, "single_queries": ns, "fit_s": round(fit_s, 3),
+        "rounds": timing["rounds"], "stable": timing["stable"], "load_per_round": timing["load_per_round"],
+        "queries_per_s": {n: _rate(len(q) if "batch" in n else ns, v) for n, v in t.items()},
+        "speedup_batch": timing["ratio"]["batch"],
+        "speedup_batch_each_run": timing["ratio_each_round"]["batch"],
+        "speedup_one_at_a_time": timing["ratio"]["one_at_a_time"],
+        "speedup_one_at_a_time_each_run": timing["ratio_each_round"]["one_at_a_time"],
+        "faiss": ({"version": faiss.__version__, "index": "IndexFlatL2 (exact, float32)",
+                   "speedup_batch": timing["ratio"]["faiss_batch"],
+                   "speedup_one_at_a_time": timing["ratio"]["faiss_one_at_a_time"],
+                   "speedup_batch_each_run": timing["ratio_each_round"]["faiss_batch"],
+                   "speedup_one_at_a_time_each_run": timing["ratio_each_round"]["faiss_one_at_a_time"]}
+                  if fa is not None else "not installed (pip install 'rmbuild[bench]')"),
+        "one_thread_cpu": _cpu_one_thread(ours, sk, fa, q, xq, ns, reps, k),
         "target": {"speedup_batch": 3.0, "speedup_one_at_a_time": 10.0},
         "same_neighbour_sets": round(float(same.mean()), 4),
         "differing_sets_at_exact_ties": int((~same & tied).sum()),
@@ -149,6 +212,7 @@ def knn_bench(rm, q: np.ndarray, k: int = 15, n_single: int = 300, reps: int = 5
         "max_prediction_diff_m": round(float(np.abs(p_ours - p_sk).max()), 4),
         "max_distance_diff_db": round(float(np.abs(ours.kneighbors(q)[0] - d_sk).max()), 9),
     }
+    return out
 
 
 def main(preset: str = "large", seed: int = 7, k: int = 15, n_single: int = 300) -> dict:

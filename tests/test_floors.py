@@ -299,3 +299,35 @@ def test_floor_filter_smooths_an_outlier_and_follows_a_change() -> None:
     assert (alone == truth).all()  # each scan alone is clear
     assert pred[10] == 0 and (pred[:20] == 0).all()  # one scan does not move the walk to another floor
     assert (pred[22:] == 1).all()  # a lasting change is followed within two scans
+
+
+def test_ilc_site_ingest_by_floor_folder_tasks_writes_the_same_workspace(shared_datasets: Path,
+                                                                          tmp_path: Path) -> None:
+    """`build` reads a site's floor folders as one task each (here on the in-process runner): every file of the
+    workspace is the same as one read of the whole site gives, the reports (and their digests) but for their
+    times."""
+    import json
+
+    from rmbuild.config.build import parse_scheduler
+    from rmbuild.stages.dask_run import executor
+
+    _ilc_subset(tmp_path / "in", "site2")
+    whole = ingest.run([tmp_path / "in" / "site2"], tmp_path / "whole", IngestConfig(), fmt="msft-ilc")
+    with executor(parse_scheduler("serial"), None) as runner:
+        tasks = ingest.run([tmp_path / "in" / "site2"], tmp_path / "tasks", IngestConfig(), fmt="msft-ilc",
+                           runner=runner)
+    assert list(tasks["floors"]) == list(whole["floors"]) and len(whole["floors"]) > 1
+    assert tasks["notes"] == whole["notes"] and tasks["skipped"] == whole["skipped"]
+
+    def timeless(o):
+        if isinstance(o, dict):
+            return {k: timeless(v) for k, v in o.items()
+                    if k not in ("time_s", "created_utc", "completed_utc") and not k.endswith("report.json")}
+        return [timeless(v) for v in o] if isinstance(o, list) else o
+
+    files = sorted(p.relative_to(tmp_path / "whole") for p in (tmp_path / "whole").rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(tmp_path / "tasks") for p in (tmp_path / "tasks").rglob("*") if p.is_file())
+    for f in files:
+        a, b = (tmp_path / "whole" / f).read_bytes(), (tmp_path / "tasks" / f).read_bytes()
+        if a != b:
+            assert f.suffix == ".json" and timeless(json.loads(a)) == timeless(json.loads(b)), f

@@ -111,3 +111,47 @@ def test_segment_neighbours_equal_full_ranking():
         want = np.argsort(d[i], kind="stable")[:5]
         want = set(want[np.isfinite(d[i, want])].tolist())
         assert set(sj[si == i].tolist()) == want
+
+
+def test_segment_neighbours_do_not_depend_on_the_worker_threads(monkeypatch):
+    from rmbuild import blas
+    from rmbuild.slam.pairs import segment_neighbours
+
+    fp, meta = _random(n=300, m=30, n_walks=6, seed=4)
+    rm = RssMatrix.from_fingerprints(fp, -110.0)
+    cfg = SearchParams(block_rows=64)
+    monkeypatch.setattr(blas, "WORKERS", 1)
+    one = segment_neighbours(rm, meta, cfg, 5)
+    monkeypatch.setattr(blas, "WORKERS", 3)
+    three = segment_neighbours(rm, meta, cfg, 5)
+    assert all(np.array_equal(a, b) for a, b in zip(one, three))
+
+
+def test_leaf_search_finds_nearly_every_exact_neighbour(monkeypatch):
+    """From LEAF_MIN_SEGMENTS on each segment is searched among its nearest leaves: on fingerprints of a smooth
+    field along six walks it finds most of the exact sweep's neighbours, and only searchable ones."""
+    from rmbuild.slam import pairs
+    from rmbuild.slam.pairs import segment_neighbours
+
+    rng = np.random.default_rng(5)
+    n, m = 1200, 40
+    pos = rng.uniform(0, 100, n)
+    ap = rng.uniform(0, 100, m)
+    rss = (-40 - 30 * np.log10(1 + np.abs(pos[:, None] - ap[None, :])) + rng.normal(0, 2, (n, m))).astype(np.float32)
+    rss[rss < -85] = np.nan
+    fp = Fingerprints(np.arange(n), np.array([f"a{i}" for i in range(m)], dtype=object), rss,
+                      (~np.isnan(rss)).astype(np.int32))
+    walk = np.repeat(np.arange(6), n // 6)
+    step = np.tile(np.arange(n // 6), 6)
+    meta = RowMeta(np.arange(n), walk, step, step * 0.6 + walk * 1000.0, step * 0.7)
+    rm = RssMatrix.from_fingerprints(fp, -110.0)
+    cfg = SearchParams(within_walk=False)
+    exact = segment_neighbours(rm, meta, cfg, 5)
+    monkeypatch.setattr(pairs, "LEAF_MIN_SEGMENTS", 100)
+    monkeypatch.setattr(pairs, "LEAF_SEGMENTS", 40)
+    monkeypatch.setattr(pairs, "LEAF_PROBES", 8)
+    leaf = segment_neighbours(rm, meta, cfg, 5)
+    want, got = set(zip(*(a.tolist() for a in exact))), set(zip(*(a.tolist() for a in leaf)))
+    assert len(want & got) >= 0.9 * len(want) and len(got) <= len(want)
+    si, sj = leaf
+    assert (meta.walk[si] != meta.walk[sj]).all() and (np.bincount(si) <= 5).all()

@@ -24,10 +24,10 @@ def _rot_known(theta, known, sigma=np.inf):
     return RotationPriors(np.asarray(theta, float), np.asarray(known, bool), np.full(len(theta), sigma))
 
 
-@pytest.mark.parametrize("dense", [False, True])
-def test_refine_walks_recovers_frames(dense, monkeypatch):
-    if dense:  # the dense Cholesky step of many walks gives the sparse LU's frames to rounding
-        monkeypatch.setattr(refine, "DENSE_SOLVE_MIN_VARS", 3)
+@pytest.mark.parametrize("iterative", [False, True])
+def test_refine_walks_recovers_frames(iterative, monkeypatch):
+    if iterative:  # the CG step of many walks gives the sparse LU's frames to rounding
+        monkeypatch.setattr(refine, "ITERATIVE_SOLVE_MIN_VARS", 3)
     rng = np.random.default_rng(0)
     n_w, per = 4, 30
     raw = np.zeros((n_w * per, 3))
@@ -368,7 +368,7 @@ def test_an_se2_fallback_that_contradicts_the_walks_compass_does_not_place_it():
     assert ok and f is not None and f.method == "se2"
 
 
-def test_refine_dense_and_sparse_steps_agree(monkeypatch):
+def test_refine_iterative_and_sparse_steps_agree(monkeypatch):
     import scipy.sparse as sp
 
     rng = np.random.default_rng(1)
@@ -376,9 +376,21 @@ def test_refine_dense_and_sparse_steps_agree(monkeypatch):
     A = (J.T @ J + sp.identity(90) * 1e-6).tocsc()
     b = rng.normal(size=90)
     sparse = refine._solve(A, b)
-    monkeypatch.setattr(refine, "DENSE_SOLVE_MIN_VARS", 3)
+    monkeypatch.setattr(refine, "ITERATIVE_SOLVE_MIN_VARS", 3)
     np.testing.assert_allclose(refine._solve(A, b), sparse, rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(A @ sparse, b, atol=1e-8)
+    # the gauge's stiff diagonal (1e9 on the reference walk) is what the 3 x 3 blocks precondition away
+    A = (A + sp.diags(np.r_[1e9, 1e9, 1e9, np.zeros(87)])).tocsc()
+    np.testing.assert_allclose(refine._solve(A, b), sp.linalg.spsolve(A, b), rtol=1e-7, atol=1e-9)
+
+
+def test_block_jacobi_cg_says_when_it_does_not_converge():
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    J = sp.random(300, 60, density=0.1, random_state=4) + sp.identity(60, format="csr")[rng.integers(0, 60, 300)]
+    A = (J.T @ J + sp.identity(60) * 1e-6).tocsr()
+    assert refine.block_jacobi_cg(A, rng.normal(size=60), 1e-12, 2) is None
 
 
 def test_rf_check_offsets_from_the_upper_triangle_equal_the_full_pass(monkeypatch):

@@ -238,8 +238,10 @@ def test_preset_sizes():
     assert 450_000 <= _expected_steps(month) <= 550_000  # a venue-month: large's venue, ten times the walks
     assert month.walkers.n_long_walks + month.walkers.n_short_walks == 1000
     assert month.venue == large.venue and month.radio == large.radio
-    w = month.walkers  # within the simulator's bound on the most steps a simulation may draw
-    assert w.n_long_walks * w.long_walk_steps[1] + w.n_short_walks * w.short_walk_steps[1] <= MAX_SIMULATED_STEPS
+    year = preset_config("year", 0)  # four venue-months
+    assert 1_800_000 <= _expected_steps(year) <= 2_200_000 and year.venue == large.venue
+    for w in (month.walkers, year.walkers):  # within the simulator's bound on the most steps a simulation may draw
+        assert w.n_long_walks * w.long_walk_steps[1] + w.n_short_walks * w.short_walk_steps[1] <= MAX_SIMULATED_STEPS
     assert 100 <= d.venue.width_m <= 150 and 60 <= d.venue.height_m <= 100 and d.venue.hall_width_m > 20
     assert SimulateConfig() == preset_config("default", 7)
     with pytest.raises(ValueError, match="unknown simulate preset"):
@@ -294,7 +296,7 @@ def test_config_strict_and_round_trip():
         from_dict(SimulateConfig, {"venue": {"widht_m": 100.0}})
     with pytest.raises(ConfigError):
         from_dict(SimulateConfig, {"walkers": {"start_facing": "sideways"}})
-    for name in ("tiny", "large", "month", "corridor12"):
+    for name in ("tiny", "large", "month", "year", "corridor12"):
         cfg = preset_config(name, 11)
         text = to_toml(cfg, "simulate")
         assert from_dict(SimulateConfig, tomllib.loads(text)["simulate"]) == cfg

@@ -115,3 +115,22 @@ def test_unlinked_walks_count_at_their_raw_placement():
     assert m["mean"] == pytest.approx(1.5 * 4 / 6, abs=1e-6)
     assert landmark_error_unlinked_at_raw(raw, opt, ds, ["a", "b", "c"]) is None  # all linked: nothing to add
     assert landmark_error_unlinked_at_raw(raw, opt, SimpleNamespace(fixes=fixes.iloc[:0]), ["a"]) is None
+
+
+def test_walk_grouping_keeps_each_walks_rows_in_order():
+    from rmbuild.evaluate.trajectory import named, walk_rows
+
+    ids = pd.Series(["b", "a", "b", "c", "a", "b"])
+    rows = walk_rows(ids)
+    assert list(rows) == ["b", "a", "c"]  # first appearance
+    assert [r.tolist() for r in rows.values()] == [[0, 2, 5], [1, 4], [3]]
+    assert named(ids, ["a", "c"]).tolist() == [False, True, False, True, True, False]
+
+
+def test_metrics_do_not_depend_on_walks_being_contiguous():
+    est, tru = _two_walks(4.0)
+    order = np.r_[np.arange(0, 40, 2), np.arange(1, 40, 2)]  # the two walks' rows interleaved
+    a = heading_alignment_error_deg(est, tru, np.eye(2))
+    b = heading_alignment_error_deg(est.iloc[order].reset_index(drop=True), tru.iloc[order].reset_index(drop=True),
+                                    np.eye(2))
+    assert a == pytest.approx(b, abs=1e-12)

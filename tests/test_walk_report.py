@@ -106,3 +106,45 @@ def test_unlinked_warning_names_the_groups_of_unlinked_walks():
     assert "group" not in unlinked_warning(walks, table, 0)
     table["linked"] = True
     assert unlinked_warning(walks, table, 0) is None
+
+
+def _information(rng, groups: list[int], isolated: int) -> np.ndarray:
+    """A dense information of walk frames: random position-difference pairs inside each group of walks (a
+    translation-invariant Jacobian), a compass on every other walk, and ``isolated`` walks with no evidence."""
+    n = sum(groups) + isolated
+    H = np.zeros((3 * n, 3 * n))
+    first = 0
+    for size in groups:
+        for _ in range(12 * size):
+            a, b = rng.choice(np.arange(first, first + size), 2, replace=False)
+            j = np.zeros((2, 3 * n))
+            j[:, 3 * a:3 * a + 2], j[:, 3 * b:3 * b + 2] = np.eye(2), -np.eye(2)
+            j[:, 3 * a + 2], j[:, 3 * b + 2] = rng.normal(0, 5, 2), rng.normal(0, 5, 2)
+            H += j.T @ j
+        first += size
+    H[np.arange(2, 3 * sum(groups), 6), np.arange(2, 3 * sum(groups), 6)] += 100.0
+    return H
+
+
+def test_marginal_blocks_are_the_pseudo_inverses_blocks():
+    """Groups of walks apart from each other and a placed walk without evidence: the blocks from one
+    Cholesky factorisation equal those of numpy's pseudo-inverse (the gauge of each group left free)."""
+    import scipy.sparse as sp
+
+    H = _information(np.random.default_rng(5), [6, 4], isolated=1)
+    C = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
+    got = uncertainty.marginal_blocks(sp.csr_matrix(H))
+    want = np.stack([C[3 * w:3 * w + 3, 3 * w:3 * w + 3] for w in range(len(H) // 3)])
+    np.testing.assert_allclose(got, want, atol=1e-9 * np.abs(want).max())
+
+
+def test_beyond_the_exact_size_each_walk_is_held_by_its_own_block(monkeypatch):
+    import scipy.sparse as sp
+
+    H = _information(np.random.default_rng(6), [8], isolated=0)
+    monkeypatch.setattr(uncertainty, "EXACT_MAX_WALKS", 4)
+    got = uncertainty.marginal_blocks(sp.csr_matrix(H))
+    np.testing.assert_allclose(got[3], np.linalg.inv(H[9:12, 9:12]), rtol=1e-10)
+    exact = np.linalg.pinv(H, rcond=1e-9, hermitian=True)[9:12, 9:12]
+    assert np.trace(got[3]) == pytest.approx(np.trace(exact), rel=0.5)  # a walk held by many: close to it
+    assert np.isfinite(predict()).all()

@@ -9,7 +9,7 @@ from rmbuild.cli.options import common_options, start
 
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False), required=False)
-@click.option("--preset", type=click.Choice(["tiny", "default", "large", "month", "corridor12"]), default="default",
+@click.option("--preset", type=click.Choice(["tiny", "default", "large", "month", "year", "corridor12"]), default="default",
               show_default=True, help="Venue size: tiny (tests, seconds), default (~10 walks, ~5,000 steps), "
               "large (~50,000 steps, benchmarks), month (large's venue, ~500,000 steps, 1,000 walks), "
               "corridor12 (12 walks along one corridor, as in Gu et al. 2017).")

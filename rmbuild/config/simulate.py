@@ -14,8 +14,8 @@ from typing import Literal
 from rmbuild.config.base import bounded, check_ranges
 
 #: steps; the most a simulation may draw (n_long_walks x long max + n_short_walks x short max): "large" has
-#: ~61,000; 1,000,000 steps keep a simulation within a few GB
-MAX_SIMULATED_STEPS = 1_000_000
+#: ~61,000, "year" ~2,440,000 (its ~2,000,000 steps simulate and ingest within ~6 GB)
+MAX_SIMULATED_STEPS = 2_500_000
 
 
 def _ordered(name: str, r: tuple[float, float]) -> None:
@@ -148,18 +148,18 @@ class WalkersConfig:
     # count; users (people); each has its own step model S = alpha f + beta.
     n_users: int = bounded(6, 1, 1000)
     # count; long patrol walks (visit rooms, hall, corridors; revisit places).
-    n_long_walks: int = bounded(6, 0, 1000)
+    n_long_walks: int = bounded(6, 0, 5000)
     # steps; range of the length of a long walk.
     long_walk_steps: tuple[float, float] = bounded((650.0, 900.0), 2.0, 100000.0)
     # count; short walks that mostly cross the venue along corridors / through the hall.
-    n_short_walks: int = bounded(4, 0, 1000)
+    n_short_walks: int = bounded(4, 0, 5000)
     # steps; range of the length of a short walk.
     short_walk_steps: tuple[float, float] = bounded((50.0, 150.0), 2.0, 100000.0)
     # "random": short walks head for random corridor/hall places; "end_to_end": along the longest
     # x corridor from one end to the other (Gu et al. 2017's straight-walk experiment).
     short_walk_route: Literal["random", "end_to_end"] = "random"
     # count; walks (the last ones) with role "test", held out for evaluation.
-    n_test_walks: int = bounded(2, 0, 2000)
+    n_test_walks: int = bounded(2, 0, 10000)
     # Hz; range of a user's mean step frequency.
     step_freq_hz: tuple[float, float] = bounded((1.5, 2.1), 0.5, 4.0)
     # Hz; sigma of a walk's step frequency around its user's mean.
@@ -375,13 +375,14 @@ class SimulateConfig:
 
 
 
-PRESETS = ("tiny", "default", "large", "month", "corridor12")
+PRESETS = ("tiny", "default", "large", "month", "year", "corridor12")
 
 
 def preset_config(name: str, seed: int) -> SimulateConfig:
     """The named preset with ``seed``: "tiny" (tests, ~600 steps), "default" (~10 walks, ~5,000 steps),
     "large" (~50,000 steps, benchmarks), "month" (large's venue walked ten times as much: ~500,000 steps,
-    1,000 walks, a month of a venue's staff walks; the scaling benchmark), "corridor12" (12 straight-ish
+    1,000 walks, a month of a venue's staff walks; the scaling benchmark), "year" (four months of it: ~2,000,000
+    steps, 4,000 walks), "corridor12" (12 straight-ish
     walks along one long corridor, random initial headings: Gu et al. 2017's heading-alignment experiment).
     Raises ValueError for other names."""
     base = SimulateConfig(seed=seed)
@@ -413,6 +414,9 @@ def preset_config(name: str, seed: int) -> SimulateConfig:
     elif name == "month":
         lg = preset_config("large", seed)
         cfg = r(lg, walkers=r(lg.walkers, n_users=100, n_long_walks=400, n_short_walks=600, n_test_walks=100))
+    elif name == "year":
+        lg = preset_config("large", seed)
+        cfg = r(lg, walkers=r(lg.walkers, n_users=400, n_long_walks=1600, n_short_walks=2400, n_test_walks=400))
     elif name == "corridor12":
         cfg = r(
             base,

@@ -65,11 +65,10 @@ def estimates_at_fixes(poses: pd.DataFrame, fix_walk: np.ndarray, fix_t: np.ndar
     rows = pd.Series(np.arange(len(poses))).groupby(poses["walk_id"].astype(str).to_numpy(), sort=False).indices
     t = poses["t_s"].to_numpy(dtype=float)
     xy = poses[["x_m", "y_m"]].to_numpy(dtype=float)
-    for wid in np.unique(fix_walk):
-        r = rows.get(str(wid))
+    for wid, m in walk_rows(fix_walk).items():
+        r = rows.get(wid)
         if r is None or len(r) == 0:
             continue
-        m = fix_walk == wid
         tt, ft = t[r], fix_t[m]
         inside = (ft >= tt[0]) & (ft <= tt[-1])
         out = np.full((len(ft), 2), np.nan)
@@ -147,10 +146,8 @@ def heading_alignment_error_deg(
         est = est @ np.asarray(world_R).T
     tru = truth[["x_m", "y_m"]].to_numpy(dtype=float)
     errs = []
-    wids = poses["walk_id"].astype(str).to_numpy()
-    for wid in pd.unique(wids):
-        m = wids == wid
-        if m.sum() < 2 or np.ptp(tru[m], axis=0).max() < 1e-6:
+    for m in walk_rows(poses["walk_id"]).values():
+        if len(m) < 2 or np.ptp(tru[m], axis=0).max() < 1e-6:
             continue
         r, _ = align_se2(est[m], tru[m])
         errs.append(abs(math.degrees(rotation_angle_rad(r))))
@@ -158,6 +155,21 @@ def heading_alignment_error_deg(
         return None
     e = np.asarray(errs)
     return {"mean": float(e.mean()), "std": float(e.std())}
+
+
+def walk_rows(walk_ids) -> dict[str, np.ndarray]:
+    """Walk id (as text) -> its row indices (walks in order of first appearance, rows ascending): one
+    grouping of the column instead of comparing every row's id once per walk."""
+    codes, uniq = pd.factorize(pd.Series(walk_ids).astype(str))
+    order = np.argsort(codes, kind="stable")
+    bounds = np.r_[0, np.cumsum(np.bincount(codes, minlength=len(uniq)))]
+    return {str(w): order[bounds[k]:bounds[k + 1]] for k, w in enumerate(uniq)}
+
+
+def named(walk_ids, names) -> np.ndarray:
+    """bool (len(walk_ids),): the entries whose id (as text) is one of ``names`` (a hash lookup per entry:
+    numpy's ``isin`` on text columns sorts both sides)."""
+    return pd.Series(walk_ids).astype(str).isin({str(w) for w in names}).to_numpy()
 
 
 def trajectory_metrics(poses_df: pd.DataFrame, dataset, align: bool = True, fit_walks=None) -> dict:
@@ -200,8 +212,7 @@ def metric_alignment(poses_df: pd.DataFrame, dataset, fit_walks) -> tuple[np.nda
     all; all too when fewer than 2 points are named): on the truth poses when there is one per pose,
     else on the fixes; identity when neither gives 2 points."""
     truth, fixes = _truth_per_pose(dataset, poses_df), getattr(dataset, "fixes", None)
-    wids = poses_df["walk_id"].astype(str).to_numpy()
-    sel = np.ones(len(poses_df), bool) if fit_walks is None else np.isin(wids, [str(w) for w in fit_walks])
+    sel = np.ones(len(poses_df), bool) if fit_walks is None else named(poses_df["walk_id"], fit_walks)
     if truth is not None:
         est = poses_df[["x_m", "y_m"]].to_numpy(float)
         use = sel if sel.sum() >= 2 else np.ones(len(est), bool)
@@ -212,8 +223,8 @@ def metric_alignment(poses_df: pd.DataFrame, dataset, fit_walks) -> tuple[np.nda
     est = estimates_at_fixes(poses_df, fw, fixes["t_s"].to_numpy(float))
     ok = np.isfinite(est).all(axis=1)
     if fit_walks is not None:
-        named = ok & np.isin(fw, [str(w) for w in fit_walks])
-        ok = named if named.sum() >= 2 else ok
+        on_named = ok & named(fw, fit_walks)
+        ok = on_named if on_named.sum() >= 2 else ok
     if ok.sum() < 2:
         return np.eye(2), np.zeros(2)
     return align_se2(est[ok], fixes[["x_m", "y_m"]].to_numpy(float)[ok])

@@ -72,6 +72,12 @@ def split_floors(raw: RawInput) -> dict[str, RawInput] | None:
     return {f: _floor_input(raw, f, [(w, s) for w, ff, s in segments if ff == f]) for f in floors}
 
 
+def whole_floor(raw: RawInput, floor: str) -> RawInput:
+    """``raw`` (every walk on ``floor``, its floor columns consumed) as :func:`split_floors` gives a floor of a
+    larger input: a read of one floor folder made what a read of its whole building makes of that floor."""
+    return _floor_input(raw, floor, [(w, (w, -np.inf, np.inf)) for w in raw.walks["walk_id"].astype(str)])
+
+
 def _apply_cuts(raw: RawInput, cuts: dict[str, list[tuple[float, str]]]) -> None:
     """Give ``raw`` the floor columns the barometer cuts say (poses by time; a walk its first part's), and a
     note per walk cut."""

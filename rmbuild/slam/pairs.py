@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from rmbuild.blas import blocks_in_parallel
 from rmbuild.slam.rss import RssMatrix
 
 Progress = Callable[[str, dict], None] | None
@@ -31,6 +32,15 @@ BLOCK_ELEMS = 1 << 24
 #: segments; every this-many-th segment is the sample that bounds each segment's k-th nearest distance
 #: (about top_k x this many candidates per segment are then ranked)
 SAMPLE_STRIDE = 8
+#: segments; from this many on (a venue walked for months: ~600,000 poses) each segment's k nearest are sought
+#: among the segments of the LEAF_PROBES leaves nearest to its own instead of among all: the exact sweep is
+#: quadratic (a venue-year's 208,000 segments: ~10 min), this is linear. Leaves are LEAF_SEGMENTS segments
+#: alike in the first LEAF_DIMS principal components of their RSS, cut by median splits. On a venue-month's
+#: 52,000 segments it found 99.6 % of the exact sweep's neighbours (docs/notes/scale.md)
+LEAF_MIN_SEGMENTS = 60_000
+LEAF_SEGMENTS = 128
+LEAF_PROBES = 64
+LEAF_DIMS = 16
 
 
 @dataclass(frozen=True)
@@ -218,41 +228,105 @@ def _masked_sq(srm: RssMatrix, smeta: RowMeta, rows: np.ndarray, cols: np.ndarra
 def segment_neighbours(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int,
                        progress: Progress = None) -> tuple[np.ndarray, np.ndarray]:
     """(si, sj): each segment's (up to) ``k`` nearest searchable segments (finite distance), one row per
-    (segment, neighbour).
+    (segment, neighbour), in order of segment, distance, neighbour.
 
-    Each row's k-th smallest distance to every SAMPLE_STRIDE-th segment bounds its k-th nearest from
-    above; one sweep over the upper triangle of the distance matrix (it is symmetric) then keeps every
-    entry within its row's or its column's bound, and the k smallest per row are taken from those."""
+    Up to LEAF_MIN_SEGMENTS segments exactly: each row's k-th smallest distance to every SAMPLE_STRIDE-th
+    segment bounds its k-th nearest from above; one sweep over the upper triangle of the distance matrix (it is
+    symmetric) then keeps every entry within its row's or its column's bound, and the k smallest per row are
+    taken from those. From LEAF_MIN_SEGMENTS on among the segments of the nearest leaves (:func:`leaf_blocks`).
+    The blocks run on worker threads (:func:`rmbuild.blas.blocks_in_parallel`)."""
     n = len(srm)
-    bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n, 1)))
-    sample = np.arange(0, n, SAMPLE_STRIDE)
-    bound = np.full(n, np.inf, np.float32)
-    if len(sample) > k:
-        for s in range(0, n, bs):
-            rows = np.arange(s, min(n, s + bs))
-            bound[rows] = np.partition(_masked_sq(srm, smeta, rows, sample, pcfg), k - 1, axis=1)[:, k - 1]
-    out_r, out_c, out_d = [], [], []
-    for s in range(0, n, bs):
-        e = min(n, s + bs)
-        rows, cols = np.arange(s, e), np.arange(s, n)
-        d = _masked_sq(srm, smeta, rows, cols, pcfg)
-        fin = np.isfinite(d)
-        r, c = np.nonzero(fin & (d <= bound[rows][:, None]))  # candidates of the rows
-        out_r += [rows[r]]
-        out_c += [cols[c]]
-        out_d += [d[r, c]]
-        r, c = np.nonzero(fin[:, e - s:] & (d[:, e - s:] <= bound[e:][None, :]))  # of the columns past the block
-        out_r += [cols[e - s + c]]
-        out_c += [rows[r]]
-        out_d += [d[r, e - s + c]]
-        if progress:
-            progress("pair_search", {"done": e, "total": n, "phase": "segments"})
-    ri, ci, dd = np.concatenate(out_r), np.concatenate(out_c), np.concatenate(out_d)
+    if n >= LEAF_MIN_SEGMENTS:
+        jobs = leaf_blocks(srm)
+        parts = blocks_in_parallel(lambda job: _leaf_candidates(srm, smeta, pcfg, k, *job), jobs,
+                                   _progress_of(progress, np.cumsum([len(r) for r, _ in jobs])))
+    else:
+        bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n, 1)))
+        bound = _sample_bounds(srm, smeta, pcfg, k, bs)
+        starts = list(range(0, n, bs))
+        parts = blocks_in_parallel(lambda s: _sweep_block(srm, smeta, pcfg, bound, s, min(n, s + bs)), starts,
+                                   _progress_of(progress, [min(n, s + bs) for s in starts], n))
+    ri, ci, dd = (np.concatenate([p[i] for p in parts]) for i in range(3))
     order = np.lexsort((ci, dd, ri))
     ri, ci = ri[order], ci[order]
     start = np.r_[0, np.flatnonzero(np.diff(ri)) + 1] if len(ri) else np.zeros(0, np.int64)
     rank = np.arange(len(ri)) - np.repeat(start, np.diff(np.r_[start, len(ri)]))
     return ri[rank < k], ci[rank < k]
+
+
+def _progress_of(progress: Progress, done_after: list | np.ndarray, total: int | None = None):
+    """A callback for :func:`blocks_in_parallel`: block i done -> progress("pair_search", done, total)."""
+    if progress is None:
+        return None
+    total = int(done_after[-1]) if total is None and len(done_after) else total
+    return lambda i: progress("pair_search", {"done": int(done_after[i]), "total": total, "phase": "segments"})
+
+
+def _sample_bounds(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int, bs: int) -> np.ndarray:
+    """Each row's k-th smallest squared distance to every SAMPLE_STRIDE-th segment (inf with fewer)."""
+    n = len(srm)
+    sample = np.arange(0, n, SAMPLE_STRIDE)
+    bound = np.full(n, np.inf, np.float32)
+    if len(sample) <= k:
+        return bound
+
+    def block(s: int) -> np.ndarray:
+        return np.partition(_masked_sq(srm, smeta, np.arange(s, min(n, s + bs)), sample, pcfg), k - 1, axis=1)[:, k - 1]
+
+    starts = list(range(0, n, bs))
+    for s, b in zip(starts, blocks_in_parallel(block, starts)):
+        bound[s:s + len(b)] = b
+    return bound
+
+
+def _sweep_block(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, bound: np.ndarray, s: int, e: int):
+    """The candidates of rows [s, e) against columns [s, n) and of the columns past the block against the
+    rows: (row, column, squared distance) with the distance within that row's bound."""
+    n = len(srm)
+    rows, cols = np.arange(s, e), np.arange(s, n)
+    d = _masked_sq(srm, smeta, rows, cols, pcfg)
+    fin = np.isfinite(d)
+    r, c = np.nonzero(fin & (d <= bound[rows][:, None]))  # candidates of the rows
+    r2, c2 = np.nonzero(fin[:, e - s:] & (d[:, e - s:] <= bound[e:][None, :]))  # of the columns past the block
+    return (np.r_[rows[r], cols[e - s + c2]], np.r_[cols[c], rows[r2]], np.r_[d[r, c], d[r2, e - s + c2]])
+
+
+def leaf_blocks(srm: RssMatrix) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(rows, columns) per leaf: a leaf's segments (rows) and those of the LEAF_PROBES leaves whose centres lie
+    nearest to its own (its own included). Leaves: the segments' RSS projected on its first LEAF_DIMS
+    principal components (from every 7th segment), split at the median of the widest coordinate until at most
+    LEAF_SEGMENTS remain."""
+    from scipy.spatial import cKDTree
+
+    x = srm.a.astype(np.float64)
+    mu = x[::7].mean(axis=0)
+    _, vec = np.linalg.eigh((x[::7] - mu).T @ (x[::7] - mu))
+    y = (x - mu) @ vec[:, ::-1][:, :LEAF_DIMS]
+    leaves, todo = [], [np.arange(len(y))]
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= LEAF_SEGMENTS:
+            leaves.append(np.sort(idx))
+            continue
+        sub = y[idx]
+        half = len(idx) // 2
+        part = np.argpartition(sub[:, np.argmax(np.ptp(sub, axis=0))], half)
+        todo += [idx[part[half:]], idx[part[:half]]]
+    centre = np.stack([y[leaf].mean(axis=0) for leaf in leaves])
+    _, near = cKDTree(centre).query(centre, k=min(LEAF_PROBES, len(leaves)))
+    near = near.reshape(len(leaves), -1)
+    return [(leaf, np.sort(np.concatenate([leaves[q] for q in near[i]]))) for i, leaf in enumerate(leaves)]
+
+
+def _leaf_candidates(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int, rows: np.ndarray,
+                     cols: np.ndarray):
+    """(row, column, squared distance) of each row's k nearest searchable columns."""
+    d = _masked_sq(srm, smeta, rows, cols, pcfg)
+    kk = min(k, d.shape[1])
+    part = np.argpartition(d, kk - 1, axis=1)[:, :kk]
+    dd = np.take_along_axis(d, part, axis=1).ravel()
+    ok = np.isfinite(dd)
+    return np.repeat(rows, kk)[ok], cols[part.ravel()][ok], dd[ok]
 
 
 def _best_run_pairs(rm, meta, seg, first, cnt, si, sj, pcfg: SearchParams) -> pd.DataFrame:

@@ -17,6 +17,8 @@ from rmbuild.errors import InputError
 from rmbuild.types import Dataset, Fingerprints
 
 POSE_COLUMNS = ("walk_id", "step", "t_s", "x_m", "y_m", "heading_rad")
+# m; the bins of walked distance :func:`covered_m` counts
+COVERED_BIN_M = 3.0
 
 
 @dataclass
@@ -127,7 +129,7 @@ def walked_lengths(path: np.ndarray, walk_of: np.ndarray, n_walks: int) -> np.nd
     return np.where(np.isfinite(hi), hi - lo, 0.0)
 
 
-def covered_m(path: np.ndarray, bin_m: float = 3.0) -> float:
+def covered_m(path: np.ndarray, bin_m: float = COVERED_BIN_M) -> float:
     """Walked length (m) covered by a set of nodes: distinct ``bin_m`` bins of their walked distance."""
     return float(len(np.unique(np.floor(np.asarray(path) / bin_m)))) * bin_m
 

@@ -8,7 +8,7 @@ import pandas as pd
 from rmbuild.slam.checks import CheckResult
 from rmbuild.slam.evidence.base import Ties
 from rmbuild.slam.placement import Placement
-from rmbuild.slam.problem import WalkSet, covered_m
+from rmbuild.slam.problem import COVERED_BIN_M, WalkSet
 from rmbuild.slam.solve import SolveOutcome
 from rmbuild.slam.uncertainty import predicted_errors
 
@@ -59,12 +59,17 @@ def _cross_pair_counts(walks: WalkSet, pairs: pd.DataFrame):
     inr = cr["in_range"].to_numpy().astype(np.int64)
     n_cross = np.bincount(wk, minlength=n_walks) + np.bincount(wq, minlength=n_walks)
     n_in = np.bincount(wk, weights=inr, minlength=n_walks) + np.bincount(wq, weights=inr, minlength=n_walks)
-    partners = [len(set(wq[wk == w].tolist()) | set(wk[wq == w].tolist())) for w in range(n_walks)]
-    shared = np.zeros(n_walks)
-    for w in range(n_walks):
-        nodes = np.r_[nk[wk == w], nq[wq == w]]
-        shared[w] = covered_m(walks.path[nodes]) if len(nodes) else 0.0
-    return n_cross.astype(np.int64), n_in.astype(np.int64), shared, partners
+    own, other = np.r_[wk, wq], np.r_[wq, wk]  # each pair seen from both of its walks
+    partners = np.bincount(np.unique(own * n_walks + other) // n_walks, minlength=n_walks).tolist()
+    return n_cross.astype(np.int64), n_in.astype(np.int64), _covered_per_walk(walks, own, np.r_[nk, nq]), partners
+
+
+def _covered_per_walk(walks: WalkSet, walk: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(n_walks,) :func:`covered_m` of each walk's ``nodes`` (``walk``: whose node each is), all walks at once."""
+    bins = np.floor(walks.path[nodes] / COVERED_BIN_M).astype(np.int64)
+    stride = int(bins.max(initial=0)) + 1
+    return np.bincount(np.unique(walk.astype(np.int64) * stride + bins) // stride, minlength=walks.n_walks) \
+        * COVERED_BIN_M
 
 
 def placement_labels(placement: Placement, linked: np.ndarray, anchored: np.ndarray) -> np.ndarray:

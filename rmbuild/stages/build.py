@@ -94,7 +94,7 @@ def run(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], f
             runner = stack.enter_context(executor(sched, None, cfgs["build"].worker_memory_gb, on_cluster,
                                                   warm=import_floor_modules))
         if ingest_now:
-            state = _ingest(inputs, workspace, cfgs, fmt, floorplan, state, fp, force, progress)
+            state = _ingest(inputs, workspace, cfgs, fmt, floorplan, state, fp, force, progress, runner)
         else:
             log.info("inputs and ingest config unchanged since the last build: not ingested again")
         out = run_floors_as_tasks(workspace, cfgs, force, progress, on_cluster, runner, state=state)
@@ -126,15 +126,16 @@ def _previous_state(workspace: str | Path) -> dict | None:
 
 
 def _ingest(inputs: list[str | Path], workspace: str | Path, cfgs: dict[str, Any], fmt: str | None,
-            floorplan: str | Path | None, state: dict | None, fp: dict, force: bool, progress: Progress | None) -> dict:
+            floorplan: str | Path | None, state: dict | None, fp: dict, force: bool, progress: Progress | None,
+            runner: Runner | None = None) -> dict:
     """Ingest (again), keeping the outputs of the floors whose ingested data did not change; the new build
-    state (written)."""
+    state (written). On a ``runner`` the floor folders are read as tasks (:func:`rmbuild.stages.ingest.run`)."""
     from rmbuild.stages import ingest
 
     same_version = (state or {}).get("inputs", {}).get("rmbuild_version") == __version__
     with keeping_unchanged_floors(workspace, state if same_version else None) as kept:
         summary = ingest.run(inputs, workspace, cfgs["ingest"], fmt=fmt, force=force or state is not None,
-                             progress=progress, pdr_cfg=cfgs["pdr"], floorplan=floorplan)
+                             progress=progress, pdr_cfg=cfgs["pdr"], floorplan=floorplan, runner=runner)
     if kept:
         log.info(f"ingested data unchanged on {len(kept)} floor(s), their outputs kept: {', '.join(sorted(kept))}")
     floors = {n: e for n, e in (state or {}).get("floors", {}).items() if n in kept}

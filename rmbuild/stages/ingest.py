@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -14,12 +16,12 @@ from rmbuild.errors import InputError
 from rmbuild.floorplan import from_local_geojson, image_extent_m
 from rmbuild.ingest.checks import evidence_warnings
 from rmbuild.ingest.core import build_dataset
-from rmbuild.ingest.floors import floor_level, split_floors
+from rmbuild.ingest.floors import floor_level, split_floors, whole_floor
 from rmbuild.io.atomic import write_json_atomic
 from rmbuild.io.floor_image import attach_image, check_extent, read_image, split_image
 from rmbuild.io.floorplan import check_plan_frame, read_user_plan
 from rmbuild.io.formats import choose_reader, expand_inputs
-from rmbuild.io.formats.base import RawInput
+from rmbuild.io.formats.base import RawInput, Reader
 from rmbuild.io.lock import workspace_lock
 from rmbuild.io.workspace import StageWriter, Workspace, building_report_path, check_replaceable, write_dataset
 from rmbuild.stages.building import building_report
@@ -43,6 +45,7 @@ def run(
     floorplan: str | Path | None = None,
     floorplan_image: str | Path | None = None,
     image_extent: tuple[float, float, float, float] | None = None,
+    runner: Any = None,
 ) -> dict:
     """Ingest ``inputs`` (files or directories) into a new workspace; returns the ingest report.
 
@@ -62,7 +65,7 @@ def run(
     with workspace_lock(workspace, "ingest"):
         check_replaceable(Path(workspace), force)
         return _run(inputs, files, workspace, cfg, fmt, force, ensure_progress(progress), pdr_cfg or PdrConfig(),
-                    ensure_viewer(viewer), plan, image)
+                    ensure_viewer(viewer), plan, image, runner)
 
 
 def _input_files(inputs: list[str | Path], workspace: str | Path) -> list[Path]:
@@ -82,9 +85,15 @@ def _input_files(inputs: list[str | Path], workspace: str | Path) -> list[Path]:
 
 def _run(inputs: list[str | Path], files: list[Path], workspace: str | Path, cfg: IngestConfig, fmt: str | None,
          force: bool, progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, plan: dict | None,
-         image: tuple[bytes, list[float] | None] | None) -> dict:
+         image: tuple[bytes, list[float] | None] | None, runner: Any = None) -> dict:
     t0 = time.perf_counter()
     reader = choose_reader(files, fmt)
+    groups = folder_groups(inputs, files) if runner is not None and reader.reads_folders_apart else None
+    if groups is not None and plan is None and image is None:
+        built = _read_folders_as_tasks(runner, groups, reader, cfg, pdr_cfg, progress)
+        if built is not None:
+            return _write_building(inputs, workspace, cfg, reader.name, force, progress, pdr_cfg, viewer, *built,
+                                   t0, time.perf_counter() - t0)
     progress.phase(f"reading {reader.name}", len(files), "files")
     counted = [0]
 
@@ -185,22 +194,37 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
             progress.phase(f"floor {name}: phone PDR, validating, attaching readings", len(raw.imu), "walks")
         else:
             progress.phase(f"floor {name}: validating and attaching readings")
-        t1 = time.perf_counter()
-        ds, fp, summary, fplan = _build(raw, cfg, fmt, pdr_cfg, None, on_walk=lambda w: progress.advance())
-        summary = {"stage": "ingest", "format": fmt, "inputs": [str(p) for p in inputs], "floor": name, **summary}
-        summary["time_s"] = {"validate_attach": round(time.perf_counter() - t1, 3)}
-        built[name] = (ds, fp, summary, fplan, fmt != "rmbuild" or bool(raw.imu))
+        built[name] = _build_floor(raw, cfg, fmt, pdr_cfg, on_walk=lambda w: progress.advance())
+    info = {"skipped": dict(whole.skipped), "notes": list(whole.notes), "transitions": list(whole.transitions)}
+    return _write_building(inputs, workspace, cfg, fmt, force, progress, pdr_cfg, viewer, built, info, t0, t_read)
+
+
+def _build_floor(raw: RawInput, cfg: IngestConfig, fmt: str, pdr_cfg: PdrConfig, on_walk=None) -> tuple:
+    """One floor of a building validated and attached: (dataset, fingerprints, its report without the
+    inputs, its plan, whether the PDR configuration applies)."""
+    t1 = time.perf_counter()
+    ds, fp, summary, fplan = _build(raw, cfg, fmt, pdr_cfg, None, on_walk=on_walk)
+    summary["time_s"] = {"validate_attach": round(time.perf_counter() - t1, 3)}
+    return ds, fp, summary, fplan, fmt != "rmbuild" or bool(raw.imu)
+
+
+def _write_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestConfig, fmt: str, force: bool,
+                    progress: Progress, pdr_cfg: PdrConfig, viewer: Viewer, built: dict[str, tuple], info: dict,
+                    t0: float, t_read: float) -> dict:
+    """Write the floors ``built`` (name -> :func:`_build_floor`) as a building workspace and its ingest report
+    (``info``: what the reader said of the whole input: skipped, notes, transitions)."""
     progress.phase("writing workspace")
-    with Workspace.create_building(workspace, {n: floor_level(n) for n in floors}, force=force) as writers:
+    with Workspace.create_building(workspace, {n: floor_level(n) for n in built}, force=force) as writers:
         for name, (ds, fp, summary, fplan, uses_pdr) in built.items():
+            summary = {"stage": "ingest", "format": fmt, "inputs": [str(p) for p in inputs], "floor": name, **summary}
+            built[name] = (ds, fp, summary, fplan, uses_pdr)
             _write(writers[name], ds, fp, fplan, cfg, pdr_cfg, uses_pdr)
             writers[name].report = summary
     report = building_report(workspace, "ingest", "ingest")
     bssids = set().union(*(set(ds.wifi["bssid"].astype(str)) for ds, *_ in built.values()))
     report["building"].update({"aps": len(bssids), "time_s": {"read": round(t_read, 3),
                                                                "total": round(time.perf_counter() - t0, 3)}})
-    report.update({"format": fmt, "inputs": [str(p) for p in inputs], "skipped": dict(whole.skipped),
-                   "notes": list(whole.notes), "transitions": list(whole.transitions)})
+    report.update({"format": fmt, "inputs": [str(p) for p in inputs], **info})
     write_json_atomic(building_report_path(workspace, "ingest"), report)
     for name, (*_, summary, _p, _u) in built.items():
         for msg in summary["warnings"]:
@@ -208,6 +232,74 @@ def _run_building(inputs: list[str | Path], workspace: str | Path, cfg: IngestCo
     if viewer.enabled:
         log.warning("--rerun: a building's floors are viewed one at a time (`rmbuild view --floor NAME`)")
     return report
+
+
+def folder_groups(inputs: list[str | Path], files: list[Path]) -> list[list[Path]] | None:
+    """The input files by floor folder: the files under each subfolder of an input directory (the first part
+    of their path below it), in order; None when some file is not in such a folder (an input file, a file
+    at the top of an input directory) or there is only one folder."""
+    roots = [Path(p) for p in inputs]
+    groups: dict[tuple[int, str], list[Path]] = {}
+    for f in files:
+        where = next(((i, f.relative_to(r).parts) for i, r in enumerate(roots) if r.is_dir() and r in f.parents),
+                     None)
+        if where is None or len(where[1]) < 2:
+            return None
+        groups.setdefault((where[0], where[1][0]), []).append(f)
+    return list(groups.values()) if len(groups) > 1 else None
+
+
+def _read_folders_as_tasks(runner: Any, groups: list[list[Path]], reader: Reader, cfg: IngestConfig,
+                           pdr_cfg: PdrConfig, progress: Progress) -> tuple[dict[str, tuple], dict] | None:
+    """Every floor folder read, validated and attached as one task on ``runner`` (:func:`read_floor_folder`):
+    (floor name -> :func:`_build_floor`, what the reader said of the whole input: its notes with the summary
+    notes of the summed tallies last, as one read of every file gives them); None when the folders do not
+    hold one floor each (the caller reads them all at once). A folder whose input is wrong is the error."""
+    size = [sum(f.stat().st_size for f in g) for g in groups]  # the largest folder first: it ends the round
+    items = {str(i): ([str(f) for f in groups[i]], reader.name, to_toml(cfg, "ingest"), to_toml(pdr_cfg, "pdr"))
+             for i in sorted(range(len(groups)), key=lambda i: -size[i])}
+    progress.phase("reading, validating and attaching floor folders", len(items), "folders")
+    ran = runner(read_floor_folder, items, lambda name, r: progress.advance())
+    done = [ran[str(i)] for i in range(len(groups))]  # the floors in the order one read of every file gives
+    built: dict[str, tuple] = {}
+    skipped: Counter = Counter()
+    tallies: Counter = Counter()
+    notes: list[str] = []
+    for r in done:
+        if not r.get("ok"):
+            raise InputError(r["error"])
+        if r["floor"] is None or r["floor"] in built:
+            return None
+        built[r["floor"]] = r["built"]
+        skipped.update(r["skipped"])
+        tallies.update(r["tallies"])
+        notes += r["notes"]
+        for w in r["warnings"]:
+            log.warning(w)
+    notes += reader.tally_notes(dict(tallies), cfg)
+    return built, {"skipped": dict(sorted(skipped.items())), "notes": notes, "transitions": []}
+
+
+def read_floor_folder(files: list[str], fmt: str, ingest_toml: str, pdr_toml: str) -> dict:
+    """A task of `build`: one floor folder's files read, validated and attached as that floor of a whole
+    input's read would be (:func:`rmbuild.ingest.floors.split_floors`). Returns {"ok", "floor" (None when the
+    folder holds no floor name or several floors), "built" (:func:`_build_floor`), "skipped", "notes",
+    "warnings"}."""
+    from rmbuild.config import load_stage_config_text
+    from rmbuild.stages.building.task import captured_warnings
+
+    cfg = load_stage_config_text("ingest", ingest_toml, "[ingest] config of the build")
+    pdr_cfg = load_stage_config_text("pdr", pdr_toml, "[pdr] config of the build")
+    with captured_warnings() as warnings:
+        paths = [Path(f) for f in files]
+        reader = choose_reader(paths, fmt)
+        raw = reader.read(paths, cfg)
+        if split_floors(raw) is not None or not raw.floor_name or raw.transitions or raw.enu_origin is not None:
+            return {"ok": True, "floor": None, "warnings": warnings}
+        built = _build_floor(whole_floor(raw, raw.floor_name), cfg, fmt, pdr_cfg)
+    own = raw.notes[:len(raw.notes) - len(reader.tally_notes(raw.tallies, cfg))]  # the summary notes come last
+    return {"ok": True, "floor": raw.floor_name, "built": built, "skipped": dict(raw.skipped), "notes": own,
+            "tallies": dict(raw.tallies), "warnings": warnings}
 
 
 def plan_summary(plan: dict | None, ds, warnings: list[str]) -> dict | None:

@@ -80,6 +80,9 @@ class RawInput:
     imu: dict[str, RawImu] = field(default_factory=dict)
     #: human-readable notes for the ingest report (e.g. "dropped 1,234 stale Wi-Fi rows")
     notes: list[str] = field(default_factory=list)
+    #: the counts behind the reader's summary notes (the last of ``notes``: :meth:`Reader.tally_notes`), summed
+    #: when a building's floor folders are read apart
+    tallies: dict[str, int] = field(default_factory=dict)
     #: table name -> function(row position) -> "file:line" for error messages
     where: dict[str, Callable[[int], str]] = field(default_factory=dict)
     #: true for formats where one scan may list a BSSID twice (heard on two channels): such repeats of
@@ -107,6 +110,10 @@ class Reader(ABC):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    #: True when the files of different floor folders can be read apart and give each floor what a read of
+    #: them all gives it (no state across files but the summary notes' tallies): `build` then reads a
+    #: building's floor folders as one task each
+    reads_folders_apart: ClassVar[bool] = False
 
     def __init__(self) -> None:
         #: called with each input file once it is read (progress); set by the caller, None: nobody counts
@@ -124,6 +131,10 @@ class Reader(ABC):
 
         Must be cheap: look at names and at most the first few lines.
         """
+
+    def tally_notes(self, tallies: dict[str, int], cfg: IngestConfig) -> list[str]:
+        """The summary notes a read ends its ``notes`` with, from its ``tallies`` (none by default)."""
+        return []
 
     @abstractmethod
     def read(self, files: list[Path], cfg: IngestConfig) -> RawInput:

@@ -527,10 +527,34 @@ def _trace_floor(tr: _Trace, path: Path) -> str:
     return path.parent.parent.name if path.parent.name == "path_data_files" else ""
 
 
+#: tally key prefix of the traces of one SiteID (:meth:`MsftIlcReader.tally_notes`)
+SITE_TALLY = "site:"
+
+
 @register
 class MsftIlcReader(Reader):
     name = FORMAT_NAME
     description = "Microsoft Indoor Location Competition 2.0 traces (.txt/.txt.gz): phone IMU + Wi-Fi + BLE, PDR"
+
+    reads_folders_apart = True  # a trace file is parsed on its own; its floor is its header's or its folder's
+
+    def tally_notes(self, tallies: dict[str, int], cfg: IngestConfig) -> list[str]:
+        """The traces' sites when more than one, the stale and repeated rows dropped or merged."""
+        notes = []
+        sites = Counter({k[len(SITE_TALLY):]: n for k, n in tallies.items() if k.startswith(SITE_TALLY)})
+        if len(set(sites) - {""}) > 1:
+            notes.append(f"the traces come from {len(set(sites) - {''})} sites (SiteID "
+                         + ", ".join(f"{k}: {n} trace(s)" for k, n in sites.most_common() if k)
+                         + "): floors of different buildings in one workspace; ingest one site at a time")
+        if tallies.get("wifi_rows"):
+            notes.append(f"dropped {tallies['wifi_stale']:,} of {tallies['wifi_rows']:,} Wi-Fi rows last seen more "
+                         f"than {cfg.msft_ilc.max_wifi_age_s:g} s before their scan (stale cache entries)")
+        if tallies.get("ble_dup"):
+            notes.append(f"merged {tallies['ble_dup']:,} TYPE_BEACON rows repeating a MAC at one time (first kept)")
+        if tallies.get("wifi_dup"):
+            notes.append(f"merged {tallies['wifi_dup']:,} Wi-Fi rows repeating a BSSID within one scan (heard on "
+                         "two channels; the most recently seen row kept)")
+        return notes
 
     @classmethod
     def sniff(cls, files: list[Path]) -> bool:
@@ -596,18 +620,9 @@ class MsftIlcReader(Reader):
             n_dup += tr.n_wifi_dup
             n_wifi += tr.n_wifi_stale + tr.n_wifi_dup + len(tr.wifi)
             self.file_done(f)
-        if len(set(sites) - {""}) > 1:
-            notes.append(f"the traces come from {len(set(sites) - {''})} sites (SiteID "
-                         + ", ".join(f"{k}: {n} trace(s)" for k, n in sites.most_common() if k)
-                         + "): floors of different buildings in one workspace; ingest one site at a time")
-        if n_wifi:
-            notes.append(f"dropped {n_stale:,} of {n_wifi:,} Wi-Fi rows last seen more than "
-                         f"{opts.max_wifi_age_s:g} s before their scan (stale cache entries)")
-        if n_ble_dup:
-            notes.append(f"merged {n_ble_dup:,} TYPE_BEACON rows repeating a MAC at one time (first kept)")
-        if n_dup:
-            notes.append(f"merged {n_dup:,} Wi-Fi rows repeating a BSSID within one scan (heard on two channels; "
-                         "the most recently seen row kept)")
+        tallies = {"wifi_rows": n_wifi, "wifi_stale": n_stale, "wifi_dup": n_dup, "ble_dup": n_ble_dup,
+                   **{f"{SITE_TALLY}{k}": n for k, n in sites.items()}}
+        notes += self.tally_notes(tallies, cfg)
         return RawInput(
             walks=pd.DataFrame(walks, columns=["walk_id", "device_id", "user_id", "role", "source", "floor"]),
             poses=pd.DataFrame({c: pd.Series(dtype=object if c == "walk_id" else np.float64)
@@ -618,6 +633,7 @@ class MsftIlcReader(Reader):
             skipped=dict(sorted(skipped.items())),
             notes=notes,
             where=where_functions(seen, walks, wifi, wifi_lines, fixes, fix_lines, ble, ble_lines),
+            tallies=tallies,
             floorplan=plan,
             ble=pd.concat(ble, ignore_index=True) if ble else None,
             floorplans=plans if len(plans) > 1 else {},

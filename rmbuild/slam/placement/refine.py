@@ -3,10 +3,11 @@
 A robust Gauss-Newton over the frames (x, y, theta) of the placed walks: each link (k, q) between two
 placed walks contributes the 2-D difference of its nodes' world positions (sigma PAIR_SIGMA_M), each walk
 with a trusted compass a rotation prior; both with a Cauchy weight (scale ROBUST_C sigmas) on the
-*norm* of the 2-D difference. Solved by iteratively reweighted Gauss-Newton (a few hundred frames: one
-sparse solve per iteration). Written out because neither library fits: scipy's ``least_squares`` applies
-its robust loss per scalar residual (x and y apart, an anisotropic kernel), and gtsam has no built-in
-factor for a node pair seen through two walk frames.
+*norm* of the 2-D difference. Solved by iteratively reweighted Gauss-Newton (one sparse solve per
+iteration: a sparse LU, or conjugate gradients for a venue-month's thousands of frames). Written out
+because neither library fits: scipy's ``least_squares`` applies its robust loss per scalar residual (x and y
+apart, an anisotropic kernel), and gtsam has no built-in factor for a node pair seen through two walk
+frames.
 """
 
 from __future__ import annotations
@@ -29,11 +30,15 @@ GATE_FACTOR = 1.5
 # truth than the compass (docs/optimize.md: ILC F1 rotation error 11.2 -> 7.9 deg)
 SHORT_WALK_M = 40.0
 SHORT_WALK_ROT_SIGMA_SCALE = 0.1
-# unknowns (3 per placed walk); from this many on each Gauss-Newton step is solved by a dense Cholesky
-# factorisation: with hundreds of walks linked to each other the normal matrix fills in and the sparse LU
-# was most of the placement's time (a venue-month, 1,000 walks: 1.5 s a step; 729 unknowns at 12 % fill:
-# 27 ms sparse, 2.6 ms dense; docs/performance.md)
-DENSE_SOLVE_MIN_VARS = 600
+# unknowns (3 per placed walk); from this many on each Gauss-Newton step is solved by conjugate gradients
+# preconditioned by each walk's own 3 x 3 block (the links hold hundreds of walks to each other: a direct
+# factorisation fills in; a venue-month's 2,900 unknowns took 0.30 s dense, 0.50 s by a sparse LU and
+# 3-30 ms by CG in 25-60 iterations, agreeing with the dense solution to 1e-10 m; docs/notes/scale.md)
+ITERATIVE_SOLVE_MIN_VARS = 600
+# CG stops when the residual is this small relative to the right-hand side (else, after CG_MAX_ITERATIONS,
+# the sparse LU solves the step)
+CG_RELATIVE_TOL = 1e-12
+CG_MAX_ITERATIONS = 1000
 
 
 def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
@@ -83,21 +88,47 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
 
 def _solve(A, b: np.ndarray) -> np.ndarray:
     """A x = b for the symmetric positive definite normal matrix A (sparse, csc): sparse LU below
-    DENSE_SOLVE_MIN_VARS unknowns, a dense Cholesky factorisation from there on (the same solution to
-    rounding, ~1e-12)."""
+    ITERATIVE_SOLVE_MIN_VARS unknowns, block-Jacobi conjugate gradients from there on (the same solution to
+    ~1e-10; the sparse LU when CG does not converge)."""
     from scipy.sparse.linalg import spsolve
 
-    if A.shape[0] < DENSE_SOLVE_MIN_VARS:
+    if A.shape[0] < ITERATIVE_SOLVE_MIN_VARS:
         return spsolve(A, b)
-    import scipy.linalg as sl
+    x = block_jacobi_cg(A.tocsr(), b, CG_RELATIVE_TOL, CG_MAX_ITERATIONS)
+    return x if x is not None else spsolve(A, b)
 
-    from rmbuild.blas import one_blas_thread
 
-    try:
-        with one_blas_thread():  # small and repeated: two threads only wait on each other (rmbuild/blas.py)
-            return sl.cho_solve(sl.cho_factor(A.toarray(), check_finite=False), b, check_finite=False)
-    except np.linalg.LinAlgError:  # not positive definite to rounding: the sparse LU pivots
-        return spsolve(A, b)
+def block_jacobi_cg(A, b: np.ndarray, rel_tol: float, max_iterations: int) -> np.ndarray | None:
+    """Conjugate gradients on A x = b (A sparse, symmetric positive definite, unknowns in consecutive
+    triples: one walk's frame) preconditioned by the inverse of A's 3 x 3 diagonal blocks; None when the
+    residual is not below ``rel_tol`` x |b| after ``max_iterations``."""
+    coo = A.tocoo()
+    on = coo.row // 3 == coo.col // 3
+    blocks = np.zeros((A.shape[0] // 3, 3, 3))
+    blocks[coo.row[on] // 3, coo.row[on] % 3, coo.col[on] % 3] = coo.data[on]
+    inv = np.linalg.inv(blocks)
+
+    def precondition(r: np.ndarray) -> np.ndarray:
+        return np.einsum("kij,kj->ki", inv, r.reshape(-1, 3)).ravel()
+
+    x = np.zeros_like(b)
+    r = b.astype(float, copy=True)
+    stop = rel_tol * np.linalg.norm(b)
+    if np.linalg.norm(r) <= stop:
+        return x
+    z = precondition(r)
+    p, rz = z.copy(), r @ z
+    for _ in range(max_iterations):
+        ap = A @ p
+        alpha = rz / (p @ ap)
+        x += alpha * p
+        r -= alpha * ap
+        if np.linalg.norm(r) <= stop:
+            return x
+        z = precondition(r)
+        rz, rz_old = r @ z, rz
+        p = z + (rz / rz_old) * p
+    return None
 
 
 def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):

@@ -79,24 +79,27 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
     most = MAX_REFUTED_SHARE * max(int(((comp == 0) & walks.keep).sum()), 1)
     placement.rf_overlap_scans = np.zeros(walks.n_walks, np.int64)
     placement.rf_log_lr = np.full(walks.n_walks, np.nan)
-    judged: dict[int, tuple[OverlapEvidence, np.ndarray]] = {}  # walk -> its figure, the walks it overlapped
+    stale = np.ones(walks.n_walks, bool)  # walks whose figure must be (re)computed
+    overlapped_by: list[set[int]] = [set() for _ in range(walks.n_walks)]  # walk -> the judged walks overlapping it
     while len(out) < most:
-        worst, worst_llr = -1, MIN_OVERLAP_LOG_LR
         in_map = comp[check.row_walk] == 0
-        for w in (int(v) for v in np.flatnonzero((comp == 0) & walks.keep)):
-            if w == placement.reference:
-                continue
-            if w not in judged or np.isin(out[-1:], judged[w][1]).any():  # only a refuted walk changes it
-                judged[w] = check.evidence(w, xy, tree, in_map, placement.order)
-            ev = judged[w][0]
+        judge = (comp == 0) & walks.keep
+        judge[placement.reference] = False
+        for w in (int(v) for v in np.flatnonzero(judge & stale)):  # only a refuted walk changes a figure
+            ev, seen = check.evidence(w, xy, tree, in_map, placement.order)
             placement.rf_overlap_scans[w], placement.rf_log_lr[w] = ev.n_overlap, ev.mean_log_lr
-            if ev.n_overlap >= MIN_OVERLAP_SCANS and ev.mean_log_lr < worst_llr:
-                worst, worst_llr = w, ev.mean_log_lr
-        if worst < 0:
+            for v in seen.tolist():
+                overlapped_by[v].add(w)
+        stale[:] = False
+        llr = np.where(judge & (placement.rf_overlap_scans >= MIN_OVERLAP_SCANS), placement.rf_log_lr, np.nan)
+        bad = np.flatnonzero(llr < MIN_OVERLAP_LOG_LR)
+        if not len(bad):
             break
+        worst = int(bad[np.argmin(llr[bad])])  # the lowest figure; of equal ones the first walk
         comp[worst] = int(comp.max()) + 1
         placement.method[worst] = "refuted"
         out.append(worst)
+        stale[list(overlapped_by[worst])] = True
     return out
 
 
@@ -223,17 +226,35 @@ class OverlapCheck:
         (evenly spread over those within NEAR_M that share ``min_common`` APs)."""
         rw = self.rows_of[w]
         ok_row = self._map_rows(w, in_map, order)
-        rows, cols = [], []
-        for r, h in zip(rw, tree.query_ball_point(xy[rw], NEAR_M)):
-            h = np.asarray(h, np.int64)
-            h = h[ok_row[h]]
-            h = h[np.linalg.norm(xy[h] - xy[r], axis=1) < NEAR_M]
-            if len(h) > OVERLAP_MAX_NEIGHBOURS:
-                h = np.sort(h)[np.linspace(0, len(h) - 1, OVERLAP_MAX_NEIGHBOURS).astype(np.int64)]
-            rows.append(np.full(len(h), r))
-            cols.append(h)
-        row, col = np.concatenate(rows), np.concatenate(cols)
+        hits = tree.query_ball_point(xy[rw], NEAR_M)  # each scan's neighbours, ascending
+        counts = np.fromiter((len(h) for h in hits), np.int64, len(hits))
+        row = np.repeat(rw, counts)
+        col = np.concatenate([np.asarray(h, np.int64) for h in hits]) if len(hits) else np.zeros(0, np.int64)
+        keep = ok_row[col]
+        row, col = row[keep], col[keep]
+        keep = np.linalg.norm(xy[col] - xy[row], axis=1) < NEAR_M
+        row, col = row[keep], col[keep]
+        some = _spread(row, OVERLAP_MAX_NEIGHBOURS)
+        row, col = row[some], col[some]
         d, common = self.sim.rss.pairs(row, col)
         ok = common >= self.sim.min_common
         row, col = row[ok], col[ok]
         return row, col, self.sim.rf.log_lr(d[ok] - self.offset_db[w])
+
+
+def _spread(group: np.ndarray, most: int) -> np.ndarray:
+    """Indices into ``group`` (runs of equal values, each run's entries in the order to keep) keeping at most
+    ``most`` entries per run, evenly spread over it: the run's entries at ``np.linspace(0, len - 1, most)``
+    (truncated) when it is longer."""
+    start = np.flatnonzero(np.r_[True, group[1:] != group[:-1]]) if len(group) else np.zeros(0, np.int64)
+    size = np.diff(np.r_[start, len(group)])
+    short = size <= most
+    keep = [np.arange(len(group))[np.repeat(short, size)]]
+    long_start, long_size = start[~short], size[~short]
+    if len(long_start):  # linspace's own arithmetic: i * ((n - 1) / (most - 1)), the last entry n - 1
+        pos = np.zeros((len(long_start), most))
+        if most > 1:
+            pos = np.arange(most)[None, :] * ((long_size - 1) / (most - 1))[:, None]
+            pos[:, -1] = long_size - 1
+        keep.append((long_start[:, None] + pos.astype(np.int64)).ravel())
+    return np.sort(np.concatenate(keep))
