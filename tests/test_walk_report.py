@@ -99,13 +99,44 @@ def test_unlinked_warning_names_the_groups_of_unlinked_walks():
     walks.walk_ids, walks.keep = ["r", "a", "b", "c", "d", "e"], np.ones(6, bool)
     table = pd.DataFrame({"linked": [True, False, False, False, False, False], "anchored": False,
                           "component": [0, 1, 2, 2, 2, 1]})
-    line = unlinked_warning(walks, table, 0)
+    line = unlinked_warning(walks, table, 0, plan_used=False)
     assert line is not None and line.startswith("5 of 6 walk(s) not linked to the reference walk r (a, b, c, d, e)")
     assert "5 of them form 2 group(s) placed against each other (3, 2 walks)" in line
+    assert "a floor plan" in line and "a floor plan" not in unlinked_warning(walks, table, 0, plan_used=True)
     table["component"] = [0, 1, 2, 3, 4, 5]
-    assert "group" not in unlinked_warning(walks, table, 0)
+    assert "group" not in unlinked_warning(walks, table, 0, plan_used=False)
     table["linked"] = True
-    assert unlinked_warning(walks, table, 0) is None
+    assert unlinked_warning(walks, table, 0, plan_used=False) is None
+
+
+def test_every_walk_says_why_it_is_placed_or_left_out():
+    """The walk table's reason names the evidence of each kind of placement; a merge or continuity join
+    names the group it moved (from the placement's log), a walk left out says so."""
+    import pandas as pd
+
+    from rmbuild.slam.report import placement_reasons, placement_summary
+
+    table = pd.DataFrame({
+        "placement": ["reference", "translation", "merge", "continuity", "refuted", ""],
+        "linked": [True, True, True, True, False, False], "component": [0, 0, 0, 0, 1, 2],
+        "placement_inliers": [0, 12, 5, 4, 6, 0], "n_partner_walks": [3, 4, 2, 1, 2, 0],
+        "n_cross_pairs": [30, 20, 8, 3, 9, 0], "shared_path_m": [40.0, 22.0, 10.0, 5.0, 8.0, 0.0],
+        "predicted_error_m": [1.0, 2.5, 6.0, 11.0, np.nan, np.nan],
+        "rf_log_lr": [np.nan, 1.5, 0.2, np.nan, -1.2, np.nan], "rf_overlap_scans": [0, 10, 7, 0, 9, 0]})
+    log = [{"phase": "merge", "accepted": True, "members": [2], "walks": 3, "score": 9, "shared_m": 14.0},
+           {"phase": "continuity", "accepted": False, "members": [2], "walks": 1, "sigma_m": 50.0},
+           {"phase": "continuity", "accepted": True, "members": [3], "walks": 2, "sigma_m": 7.5}]
+    r = placement_reasons(table, log)
+    assert r[0].startswith("reference walk")
+    assert "on 12 scans; shares 22 m of path with 4 other walk(s)" in r[1]
+    assert "log-LR +1.50" in r[1] and "2.5 m" in r[1]
+    assert "group of 3 walk(s)" in r[2] and "fitted on 9 scans over 14 m" in r[2]
+    assert "continuity tie" in r[3] and "sigma 7.5 m" in r[3] and "11.0 m" in r[3]
+    assert r[4].startswith("left out: where Wi-Fi placed it") and "-1.20" in r[4]
+    assert r[5].startswith("left out: no verified link")
+    kinds = placement_summary(table)
+    assert kinds["wifi"] == {"walks": 1, "median_predicted_error_m": 2.5}
+    assert kinds["left out"] == {"walks": 2, "median_predicted_error_m": None}
 
 
 def _information(rng, groups: list[int], isolated: int) -> np.ndarray:

@@ -118,4 +118,25 @@ def _linked(r: dict) -> str | None:
                  "Wi-Fi (optimize/walks.parquet: placement 'refuted')")
     if anchored:
         text += f"; {anchored} more placed by anchors alone"
-    return text
+    return text + _kinds(r.get("placement_kinds") or {})
+
+
+#: placement kinds (slam/report.py:placement_summary) as the summary names them
+KIND_NAMES = {"reference": "reference", "wifi": "Wi-Fi fits", "merge": "group merges",
+              "continuity": "continuity ties", "floorplan": "the floor plan", "anchor": "anchors alone"}
+
+
+def _kinds(kinds: dict) -> str:
+    """A second line: walks per placement kind with their median predicted error, the walks left out."""
+    parts = []
+    for kind, name in KIND_NAMES.items():
+        k = kinds.get(kind)
+        if k and kind != "reference":
+            err = k.get("median_predicted_error_m")
+            parts.append(f"{name} {k['walks']} walk(s)" + (f" (median predicted error {err:.1f} m)" if err is not None
+                                                             else ""))
+    if not parts:
+        return ""
+    out = (kinds.get("left out") or {}).get("walks", 0)
+    return ("\n  placed by: " + ", ".join(parts) + (f"; left out: {out} walk(s)" if out else "")
+            + "; why, walk by walk: optimize/walks.parquet: reason")

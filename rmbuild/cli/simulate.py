@@ -5,14 +5,16 @@ from __future__ import annotations
 import click
 
 from rmbuild.cli.options import common_options, start
+from rmbuild.config.simulate import PRESETS
 
 
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False), required=False)
-@click.option("--preset", type=click.Choice(["tiny", "default", "large", "month", "year", "corridor12"]), default="default",
+@click.option("--preset", type=click.Choice(list(PRESETS)), default="default",
               show_default=True, help="Venue size: tiny (tests, seconds), default (~10 walks, ~5,000 steps), "
               "large (~50,000 steps, benchmarks), month (large's venue, ~500,000 steps, 1,000 walks), "
-              "corridor12 (12 walks along one corridor, as in Gu et al. 2017).")
+              "year (~2,000,000 steps, 4,000 walks), corridor12 (12 walks along one corridor, as in Gu et al. "
+              "2017), short (160 short phone walks of ~15-20 m, ~10 scans each).")
 @click.option("--seed", type=int, default=7, show_default=True, help="Random seed; same seed, same files.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="File format of the written tables.")

@@ -375,7 +375,7 @@ class SimulateConfig:
 
 
 
-PRESETS = ("tiny", "default", "large", "month", "year", "corridor12")
+PRESETS = ("tiny", "default", "large", "month", "year", "corridor12", "short")
 
 
 def preset_config(name: str, seed: int) -> SimulateConfig:
@@ -383,8 +383,9 @@ def preset_config(name: str, seed: int) -> SimulateConfig:
     "large" (~50,000 steps, benchmarks), "month" (large's venue walked ten times as much: ~500,000 steps,
     1,000 walks, a month of a venue's staff walks; the scaling benchmark), "year" (four months of it: ~2,000,000
     steps, 4,000 walks), "corridor12" (12 straight-ish
-    walks along one long corridor, random initial headings: Gu et al. 2017's heading-alignment experiment).
-    Raises ValueError for other names."""
+    walks along one long corridor, random initial headings: Gu et al. 2017's heading-alignment experiment),
+    "short" (the default venue crossed by 160 short phone walks of ~15-20 m and ~10 scans each, two long
+    walks among them: a mall's visitors). Raises ValueError for other names."""
     base = SimulateConfig(seed=seed)
     r = dataclasses.replace
     if name == "default":
@@ -428,6 +429,13 @@ def preset_config(name: str, seed: int) -> SimulateConfig:
                       start_facing="random", pause_prob=0.0),
             devices=r(base.devices, n_devices=3),
             magnetometer=r(base.magnetometer, n_hotspots=2),
+        )
+    elif name == "short":
+        cfg = r(
+            base,
+            radio=r(base.radio, scan_period_s=(1.5, 2.2)),
+            walkers=r(base.walkers, n_users=24, n_long_walks=2, n_short_walks=160, short_walk_steps=(22.0, 30.0),
+                      n_test_walks=10),
         )
     else:
         raise ValueError(f"unknown simulate preset {name!r} (known: {', '.join(PRESETS)})")

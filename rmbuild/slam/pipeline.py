@@ -55,7 +55,7 @@ def optimize(
     ``anchors``: walk_id, t_s, x_m, y_m (known building-frame positions). ``floorplan``: the floor's
     walkable space; the map is then built in the plan's frame. ``candidates_hook``: a function
     applied to the Wi-Fi candidate pairs before placement (tests and benchmarks inject false pairs with
-    :func:`rmbuild.slam.testing.false_pairs`). Raises :class:`InputError` for no poses, no fingerprints,
+    :func:`tests.slam_venue.false_pairs`). Raises :class:`InputError` for no poses, no fingerprints,
     NaN in poses, a single-step walk (with ``single_step_walks = "error"``), an unknown reference walk and
     anchors of unknown walks or outside their walk's time span. Walks with no verified link to the
     reference walk are reported (``walks.linked``, warnings).
@@ -103,7 +103,8 @@ def optimize(
     timing["rf_check"] = time.perf_counter() - t0
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
-    line = report.unlinked_warning(walks, walks_df, placement.reference)
+    plan_used = any(s.name == "floorplan" and getattr(s, "used", False) for s in sources)
+    line = report.unlinked_warning(walks, walks_df, placement.reference, plan_used)
     warnings += [line] if line else []
     if placement.refuted:
         warnings.append(f"{len(placement.refuted)} walk(s) left unplaced: where the Wi-Fi fit put them the radio "
@@ -120,6 +121,7 @@ def optimize(
     stats = _stats(walks, placement, outcome, checks, pairs, cand, [static] + per_source, timing, warnings, cfg)
     stats["vicinity"] = {**wifi.report(), "anisotropic_pairs": int(pairs["anisotropic"].sum())}
     stats["evidence"] = {s.name: s.report() for s in sources if s is not wifi}
+    stats["placement_kinds"] = report.placement_summary(walks_df[walks.keep])
     return OptimizeResult(
         poses=walks.poses_frame(dataset.poses, final_xyt).assign(linked=in_map),
         initial_poses=walks.poses_frame(dataset.poses, init_xyt).assign(linked=in_map),

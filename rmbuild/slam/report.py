@@ -20,7 +20,7 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
     (:mod:`rmbuild.slam.uncertainty`; NaN for walks not placed), placement, placement_round,
     placement_inliers, anchored, scale, scale_fitted, rf_overlap_scans / rf_log_lr (the RF check's figures:
     scans overlapping the walks placed before it, their mean log likelihood ratio near vs far; NaN when not
-    judged)."""
+    judged), reason (one sentence: why the walk is where it is, or why it was left out)."""
     n_walks = walks.n_walks
     n_cross, _, shared, partners = _cross_pair_counts(walks, pairs)
     linked = placement.linked & walks.keep
@@ -30,7 +30,7 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
                             np.asarray(placement.method) == "continuity")
     T = placement.world_T_walk
     anchored = placement.anchored if placement.anchored is not None else np.zeros(n_walks, bool)
-    return pd.DataFrame({
+    table = pd.DataFrame({
         "walk_id": walks.walk_ids, "n_poses": walks.ends - walks.starts, "linked": linked,
         "component": placement.component.astype(np.int64), "reference": np.arange(n_walks) == placement.reference,
         "n_cross_pairs": n_cross, "n_partner_walks": partners, "shared_path_m": shared,
@@ -44,6 +44,7 @@ def walk_table(walks: WalkSet, placement: Placement, pairs: pd.DataFrame, checks
         "rf_overlap_scans": _or(placement.rf_overlap_scans, np.zeros(n_walks, np.int64)),
         "rf_log_lr": _or(placement.rf_log_lr, np.full(n_walks, np.nan)),
     })
+    return table.assign(reason=placement_reasons(table, placement.log))
 
 
 def _or(a: np.ndarray | None, default: np.ndarray) -> np.ndarray:
@@ -84,8 +85,67 @@ def placement_labels(placement: Placement, linked: np.ndarray, anchored: np.ndar
     return out
 
 
-def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str | None:
-    """One line naming the walks not linked to the reference walk (None when every kept walk is)."""
+def placement_reasons(table: pd.DataFrame, log: list[dict]) -> list[str]:
+    """Per walk of :func:`walk_table`'s ``table``: one sentence saying how it was placed and on what
+    evidence, or why it was left out (``log``: the placement's records; a merge's or a continuity join's
+    names the walks it moved)."""
+    joined: dict[int, dict] = {}
+    for rec in log:  # the last accepted group move of each walk is the one that put it where it is
+        if rec.get("phase") in ("merge", "continuity") and rec.get("accepted") and rec.get("members"):
+            joined.update({int(w): rec for w in rec["members"]})
+    comp = table["component"].to_numpy()
+    sizes = np.bincount(comp, minlength=int(comp.max(initial=0)) + 1)
+    return [_reason(row, joined.get(i), int(sizes[row.component])) for i, row in enumerate(table.itertuples())]
+
+
+def _reason(row, group_move: dict | None, component_size: int) -> str:
+    """:func:`placement_reasons` for one walk (a row of the walk table)."""
+    how, pred = row.placement, row.predicted_error_m
+    error = f"; predicted error {pred:.1f} m" if np.isfinite(pred) else ""
+    rf = (f"; RF check: mean log-LR {row.rf_log_lr:+.2f} over {row.rf_overlap_scans} overlapping scans"
+          if np.isfinite(row.rf_log_lr) else "")
+    if how == "reference":
+        return f"reference walk: the map's frame is its own{error}"
+    if how in ("translation", "se2", "pair"):
+        fit = {"translation": "a translation (compass heading)", "se2": "a rigid fit (own rotation)",
+               "pair": "a walk-pair fit"}[how]
+        return (f"placed by Wi-Fi, {fit} on {row.placement_inliers} scans; shares {row.shared_path_m:.0f} m of "
+                f"path with {row.n_partner_walks} other walk(s){rf}{error}")
+    if how == "merge" and group_move:
+        return (f"placed with a group of {group_move['walks']} walk(s) fitted to the map as one body: "
+                f"fitted on {group_move['score']} scans over {group_move['shared_m']:.0f} m{rf}{error}")
+    if how == "continuity" and group_move:
+        return (f"placed with a group of {group_move['walks']} walk(s) by a continuity tie (one recording "
+                f"session, tie sigma {group_move['sigma_m']:.1f} m){rf}{error}")
+    if how == "floorplan":
+        return f"placed by the floor plan's fit of its group of walks{error}"
+    if how == "anchor":
+        return "not linked by Wi-Fi: placed by its anchors alone"
+    if how == "refuted":
+        return f"left out: where Wi-Fi placed it, the radio disagrees with the walks already there{rf}"
+    if row.linked:
+        return f"placed ({how}){error}"
+    group = (f" with {component_size - 1} other walk(s) placed against it" if component_size > 1 else "")
+    return (f"left out: no verified link to the map{group} ({row.n_cross_pairs} Wi-Fi pairs with "
+            f"{row.n_partner_walks} other walk(s))")
+
+
+def placement_summary(table: pd.DataFrame) -> dict:
+    """Walks per placement kind (Wi-Fi fit, merge, continuity, ...) with their median predicted error (m)."""
+    kinds = table["placement"].replace({"translation": "wifi", "se2": "wifi", "pair": "wifi", "": "left out",
+                                         "refuted": "left out"})
+    out = {}
+    for kind, rows in table.groupby(kinds.to_numpy(), sort=False):
+        pred = rows["predicted_error_m"].to_numpy(float)
+        out[str(kind)] = {"walks": len(rows),
+                          "median_predicted_error_m": round(float(np.nanmedian(pred)), 2)
+                          if np.isfinite(pred).any() else None}
+    return out
+
+
+def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int, plan_used: bool) -> str | None:
+    """One line naming the walks not linked to the reference walk (None when every kept walk is); a floor
+    plan is suggested only when none was used."""
     linked, anchored = table["linked"].to_numpy(), table["anchored"].to_numpy()
     unlinked = np.flatnonzero(walks.keep & ~linked & ~anchored)
     if not len(unlinked):
@@ -97,8 +157,9 @@ def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int) -> str
             f"{walks.walk_ids[reference]} ({names}): their placement is not constrained by Wi-Fi{also} "
             "and they are left out of the map (optimize/walks.parquet: linked, anchored, component)"
             f"{_groups(table, unlinked)}; "
-            "to place them give known positions (`optimize --anchors FILE`), a floor plan (`ingest --floorplan "
-            "FILE`) or more walks through the same places")
+            "to place them give known positions (`optimize --anchors FILE`), "
+            + ("" if plan_used else "a floor plan (`ingest --floorplan FILE`), ")
+            + "or more walks through the same places (optimize/walks.parquet: reason)")
 
 
 def _groups(table: pd.DataFrame, unlinked: np.ndarray) -> str:

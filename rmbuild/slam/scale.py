@@ -24,7 +24,7 @@ from rmbuild.config.optimize import OdometryConfig
 
 # a walk's scale is fitted only with at least SCALE_MIN_PAIRS cross pairs within range spread over at least
 # SCALE_MIN_SPAN_M of its solved path: over a short span the pairs' metres of spread swamp a few per cent
-# of stretch (docs/optimize.md: ILC F1 with 15 m fitted 46 walks and went 6.9 -> 10.8 m)
+# of stretch (docs/notes/optimize.md: ILC F1 with 15 m fitted 46 walks and went 6.9 -> 10.8 m)
 SCALE_MIN_PAIRS = 20
 SCALE_MIN_SPAN_M = 60.0
 # m; Cauchy scale of the robust fit of pair residuals

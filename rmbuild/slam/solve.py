@@ -38,7 +38,7 @@ LM_RELATIVE_TOL = 1e-3
 LM_ABSOLUTE_TOL = 1e-6
 LM_LAMBDA_INITIAL = 1e-5
 LM_LAMBDA_FACTOR = 10.0
-# keyframes; from this graph size on (a venue-month of walks, docs/performance.md) a solve that the schedule
+# keyframes; from this graph size on (a venue-month of walks, docs/notes/performance.md) a solve that the schedule
 # follows with another stops after INTERMEDIATE_MAX_ITERATIONS: its poses only re-select pairs and re-fit
 # scales, and the next solve starts from them (each iteration eliminates the whole graph, seconds at this size)
 LARGE_SOLVE_KEYFRAMES = 20_000

@@ -21,8 +21,8 @@ uncertainty whatever pairs the solve found afterwards: its figure is combined (r
 the data set's median tie sigma (each tie's: 2 m + 0.4 m/s times its gap). On MS ILC site1/F1 such
 walks were a median 8.0 m off against 3.9 m for those placed by their own radio, with predicted figures of
 5.6 and 5.0 m; with the tie's sigma the rank correlation went 0.34 -> 0.48 there, and was unchanged on
-F2, B1, F6 and IPIN (docs/optimize.md). Pairs of consecutive scans are not independent, so the covariance
-alone is too small; CALIBRATION scales the product to the walks' median real error (docs/optimize.md: on
+F2, B1, F6 and IPIN (docs/notes/optimize.md). Pairs of consecutive scans are not independent, so the covariance
+alone is too small; CALIBRATION scales the product to the walks' median real error (docs/notes/optimize.md: on
 five real floors the median ratio real / predicted was 0.8-3.4 before it, median 2.0; the rank correlation
 with the real per-walk error, each floor with the inflation's two numbers chosen on the other four, went
 from 0.27 / 0.13 / 0.49 / 0.37 / 0.61 to 0.23 / 0.42 / 0.56 / 0.54 / 0.63 on MS ILC site1/F1, site1/F2,

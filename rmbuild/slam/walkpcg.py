@@ -1,7 +1,7 @@
 """Levenberg-Marquardt for venue-month pose graphs, each step solved by conjugate gradients.
 
 A venue walked a thousand times over makes every separator of a direct elimination cut hundreds of walks:
-the dense cliques cost tens of seconds per step (docs/performance.md). Here each damped step
+the dense cliques cost tens of seconds per step (docs/notes/performance.md). Here each damped step
 ``(JᵀJ + λI) δ = Jᵀb`` (gtsam's whitened, robustly weighted linearisation) is solved by preconditioned
 conjugate gradients. The preconditioner is two-level, the walks being its subdomains:
 

@@ -183,7 +183,7 @@ PHASE_NAMES = {"pair_search": ("searching Wi-Fi vicinity pairs", "scans"), "init
 
 def _progress_adapter(progress: Progress, viewer: Viewer):
     """slam's ``progress(phase, info)`` callback -> the stage's progress: scans searched for pairs (of the
-    total), walks placed (linked by Wi-Fi, of all), LM iterations of each solve with the cost."""
+    total), walks placed before the RF check (of all), LM iterations of each solve with the cost."""
     state: dict[str, Any] = {"phase": None, "done": 0, "iter": 0, "solve": None, "solve_iter": 0}
 
     def on_progress(phase: str, info: dict) -> None:
@@ -196,7 +196,7 @@ def _progress_adapter(progress: Progress, viewer: Viewer):
             progress.advance(int(info["done"]) - state["done"])
             state["done"] = int(info["done"])
         elif phase == "init":
-            progress.message(f"{info.get('linked')} of {info.get('walks')} walks linked by Wi-Fi")
+            progress.message(f"{info.get('linked')} of {info.get('walks')} walks placed (before the RF check)")
         elif phase == "solve" and "cost_after" in info:
             state["iter"] += 1
             viewer.log_cost(state["iter"], float(info["cost_after"]))

@@ -25,7 +25,7 @@ ABS_HEADING_CORR_STEPS = 10
 # rad; floor of a walk frame's rotation sigma (the disturbance's common part does not average out)
 ABS_HEADING_SIGMA_RAD = 0.02
 # Cauchy kernel width (sigmas) of each heading prior: a local disturbance (steel, escalators) far beyond
-# the reported sigma bends the walk less (docs/optimize.md: six synthetic seeds 1.64 -> 1.38 m)
+# the reported sigma bends the walk less (docs/notes/optimize.md: six synthetic seeds 1.64 -> 1.38 m)
 HEADING_PRIOR_CAUCHY_K = 1.0
 # steps; a heading prior on every n-th step of a walk with a compass in the joint solve
 HEADING_PRIOR_EVERY_N = 10

@@ -41,7 +41,7 @@ WITHIN_GATE_M = 3.0
 WITHIN_DRIFT_PER_M = 0.02
 # Anisotropic pairs: two nodes walk (anti)parallel within this angle (deg); the estimated across/along
 # ratio is clamped to [ACROSS_RATIO_MIN, 1], needs ACROSS_MIN_PAIRS pairs in range and asks for another
-# solve when it moves by more than ACROSS_TOL (docs/optimize.md, step 7).
+# solve when it moves by more than ACROSS_TOL (docs/notes/optimize.md, step 7).
 PARALLEL_MAX_DEG = 10.0
 ACROSS_RATIO_MIN = 0.25
 ACROSS_MIN_PAIRS = 50
@@ -50,7 +50,7 @@ ACROSS_TOL = 0.02
 # steps; e.g. a device yaw instead of a step heading) keeps isotropic pairs, with a warning.
 HEADING_MOTION_MAX_DEG = 20.0
 # Scans sparser than this along the walks (median metres walked between consecutive scans of a walk), or
-# fewer per walk than SPARSE_SCANS_PER_WALK, get a warning. With the real floors' scans thinned (docs/
+# fewer per walk than SPARSE_SCANS_PER_WALK, get a warning. With the real floors' scans thinned (docs/notes/
 # optimize.md, "Scan rate") MS ILC site1/F1 linked 88 of 106 walks with its own scans (2.7 m apart, 14 per
 # walk), 41 with one scan per 5 s (6.9 m, 5 per walk), 19 with Android 9's four per two minutes (2.8 m,
 # 4 per walk); IPIN 2023 -2 (2.0 m, 34 per walk) linked 28 of 28, 26 at 6.1 m and 14 per walk, 20 at 9.9 m.
@@ -106,7 +106,6 @@ class WifiSource(EvidenceSource):
         if candidates_hook is not None:
             cand = candidates_hook(cand, walks)
         self.candidates = cand.reset_index(drop=True)
-        self.n_searched = len(self.candidates)
         self.rf = calibrate(self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s,
                             cfg.min_common_aps)
         c = self.candidates[self._is_cross(self.candidates)]

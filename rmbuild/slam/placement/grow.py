@@ -39,7 +39,7 @@ KNN_BLOCK_ROWS = 2048
 HEADING_OUTLIER_SIGMAS = 4.0
 # rad; a walk with a compass whose compass-rotation fit failed is placed by an SE(2) fit only when the fitted
 # rotation lies this close to its compass: further off, the two contradict each other and the walk waits
-# (docs/optimize.md: IPIN -2 linked-walk error 9.5 -> 5.6 m, ILC F1 kNN 1.72 -> 1.64x; 20-30 deg alike)
+# (docs/notes/optimize.md: IPIN -2 linked-walk error 9.5 -> 5.6 m, ILC F1 kNN 1.72 -> 1.64x; 20-30 deg alike)
 SE2_MAX_COMPASS_DEV_RAD = np.radians(30.0)
 
 

@@ -46,7 +46,8 @@ def link_components(st: GrowState, walks: WalkSet, ties: Ties, links: Links, rot
         delta, verdict = _vote(st, walks, links, move, stay, delta, sig, cfg)
         log.append({"phase": "continuity", "component": move, "onto": stay, "sigma_m": sig,
                     "accepted": verdict != "contradicted", "verdict": verdict, "node_a": a, "node_b": b,
-                    "walks": int((st.comp == move).sum()), "tie": tie_delta.tolist(), "T": delta.tolist()})
+                    "walks": int((st.comp == move).sum()), "tie": tie_delta.tolist(), "T": delta.tolist(),
+                    "members": np.flatnonzero(st.comp == move).tolist()})
         if verdict == "contradicted":
             continue
         members = st.comp == move

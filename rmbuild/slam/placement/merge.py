@@ -80,7 +80,7 @@ def _merge_one(st: GrowState, walks: WalkSet, nk: np.ndarray, nq: np.ndarray, ro
     log.append({"phase": "merge", "component": int(c), "onto": int(d), "walks": int(members.sum()),
                 "accepted": bool(ok), "score": f.score if f else 0, "second": f.second if f else 0,
                 "shared_m": f.shared_m if f else 0.0, "method": f.method if f else "", "pairs": len(rows),
-                "T": None if f is None else f.t.tolist()})
+                "T": None if f is None else f.t.tolist(), "members": np.flatnonzero(members).tolist()})
     if not ok or f is None:
         return False
     st.T[members] = geometry.compose(f.t, st.T[members])

@@ -27,7 +27,7 @@ ITERATIONS = 8
 GATE_FACTOR = 1.5
 # m of walked length; a shorter walk keeps its compass rotation (its prior's sigma times
 # SHORT_WALK_ROT_SIGMA_SCALE): over a few metres of lever arm, links metres apart turn it further from the
-# truth than the compass (docs/optimize.md: ILC F1 rotation error 11.2 -> 7.9 deg)
+# truth than the compass (docs/notes/optimize.md: ILC F1 rotation error 11.2 -> 7.9 deg)
 SHORT_WALK_M = 40.0
 SHORT_WALK_ROT_SIGMA_SCALE = 0.1
 # unknowns (3 per placed walk); from this many on each Gauss-Newton step is solved by conjugate gradients

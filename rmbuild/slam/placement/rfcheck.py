@@ -15,7 +15,7 @@ group of walks placed wrong together, or onto each other, does not vouch for its
 contradicts is left unlinked (out of the map) rather than kept at a wrong place.
 (Applied to the placement before the solve it also refuted walks the solve puts right; applied inside growth,
 refusing each fit as it is made, it changed which walks seed the later merges and cost MS ILC site1/F2 23
-linked walks; docs/optimize.md.)
+linked walks; docs/notes/optimize.md.)
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ class OverlapEvidence:
 
 # a linked walk whose overlap with the rest of its component has a mean log LR below this is refuted (left
 # unlinked); a walk overlapping fewer than MIN_OVERLAP_SCANS scans is not judged. Chosen on five MS ILC floors
-# and IPIN 2023 -2 (docs/optimize.md, "RF check"): refuted walks there had 1.3-2.2x the others' error.
+# and IPIN 2023 -2 (docs/notes/optimize.md, "RF check"): refuted walks there had 1.3-2.2x the others' error.
 MIN_OVERLAP_LOG_LR = -0.5
 MIN_OVERLAP_SCANS = 5
 # share of the reference component's walks the check may refute at most (a safeguard: when most of a map
