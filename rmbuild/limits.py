@@ -50,3 +50,18 @@ MAX_PLAN_VERTICES = 100_000
 MAX_PLAN_SIZE_M = 2_000.0
 #: nesting depth of a JSON file rmbuild reads (floor plans, floor_info.json, venue.json): GeoJSON needs 6
 MAX_JSON_DEPTH = 64
+#: bytes of a config file (or a venues file): a config file is a few kB; a larger file is not read into memory
+MAX_CONFIG_BYTES = 1 << 20
+#: venues in one venues file (`build --venues`)
+MAX_VENUES = 10_000
+#: bytes of an MS ILC floor's floor_info.json (a few dozen bytes: the floor's width and height)
+MAX_FLOOR_INFO_BYTES = 1 << 20
+#: bytes of truth/venue.json (simulate writes a few kB)
+MAX_VENUE_BYTES = 64 * 2**20
+#: bytes of a floor plan's image file (a scan or drawing of the floor), refused before it is read
+MAX_IMAGE_BYTES = 256 * 2**20
+#: pixels of a floor plan's image, refused before it is decoded (bounded memory: ~400 MB as RGBA)
+MAX_IMAGE_PIXELS = 100_000_000
+#: bytes of one MS ILC trace line (the longest line of the published traces has 134 bytes, an SSID at most 32):
+#: it bounds the parsers' memory, which would otherwise grow with the longest line times the row count
+MAX_TRACE_LINE_BYTES = 4096

@@ -418,3 +418,58 @@ def test_an_error_of_a_stage_without_a_place_names_the_workspace(mapped: Path, t
               rf"^error: {re.escape(str(ws))}: the map's nodes span .* at most 10 ")
     # evaluate's own: its walks carry too few fixes to score the map
     one_error(run_cli(capsys, "evaluate", "-w", ws, "--force"), rf"^error: {re.escape(str(ws))}: cannot align the map")
+
+
+# ------------------------------------------------------------------------------ devices named as files
+def _ilc_floor(folder: Path) -> Path:
+    (folder / "path_data_files").mkdir(parents=True)
+    (folder / "path_data_files" / "trace.txt").write_text(ILC_FIXTURE.read_text())
+    (folder / "geojson_map.json").write_text(
+        '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {"type": '
+        '"Polygon", "coordinates": [[[116.0, 39.0], [116.001, 39.0], [116.001, 39.001], [116.0, 39.0]]]}}]}')
+    (folder / "floor_info.json").write_text('{"map_info": {"height": 100, "width": 100}}')
+    return folder
+
+
+@pytest.mark.parametrize("where", ["plan", "config", "venues", "floor_info", "trace"])
+def test_a_device_given_as_a_file_is_refused_unread(where: str, tmp_path: Path) -> None:
+    """A floor plan, config, venues file, floor_info.json or trace that is /dev/zero (or a link to it) has no
+    size in its metadata: a floor plan read it whole until memory ran out (MemoryError, exit 1)."""
+    folder = _ilc_floor(tmp_path / "F1")
+    ws = tmp_path / "ws"
+    args: list[str | Path] = ["ingest", folder, "-w", ws, "-q"]
+    named = Path("/dev/zero")
+    if where == "plan":
+        args += ["--floorplan", "/dev/zero"]
+    elif where == "config":
+        args += ["--config", "/dev/zero"]
+    elif where == "venues":
+        args = ["build", "--venues", "/dev/zero", "-o", tmp_path / "out", "--scheduler", "serial"]
+    else:
+        named = folder / ("floor_info.json" if where == "floor_info" else "path_data_files/trace.txt")
+        named.unlink()
+        named.symlink_to("/dev/zero")
+    r = run_capped(*args, timeout_s=60)
+    lines = [ln for ln in r.err.splitlines() if ln.strip()]
+    assert r.peak_rss_mb < 1024, r.peak_rss_mb
+    if where in ("floor_info", "trace"):  # a folder's entries that are no regular files are not input files
+        assert r.code in (0, 2) and "Traceback" not in r.err and "internal error" not in r.err, r.err
+        return
+    assert r.code == 2 and len(lines) == 1 and lines[0].startswith(f"error: {named}"), r.err
+    assert re.search(r"not a regular file", lines[0]) and not ws.exists(), lines[0]
+
+
+def test_limits_on_what_a_file_may_hold_live_in_limits_py() -> None:
+    """One place for the limits a user meets (docs/reliability.md lists them): no module of rmbuild defines
+    a MAX_..._BYTES of input, or passes a literal byte count to the JSON reader."""
+    root = Path(limits.__file__).parent
+    bad = []
+    for f in sorted(root.rglob("*.py")):
+        if f.name == "limits.py":
+            continue
+        for i, line in enumerate(f.read_text().splitlines(), 1):
+            if re.match(r"^MAX_\w*(BYTES|VENUES|PIXELS)\w*\s*[:=]", line) and "MARKER" not in line:
+                bad.append(f"{f.relative_to(root)}:{i}: {line.strip()}")
+            if re.search(r"read_json_file\([^,]+,\s*\d", line):
+                bad.append(f"{f.relative_to(root)}:{i}: {line.strip()}")
+    assert bad == []

@@ -11,7 +11,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rmbuild.config.base import from_dict, load_toml, parse_toml, section_of, to_dict, to_toml, toml_key_line
+from rmbuild.config.base import from_dict, parse_toml, read_toml_text, section_of, to_dict, to_toml, toml_key_line
 from rmbuild.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -76,8 +76,8 @@ def load_stage_config(
     text = None
     if path is not None:
         p = Path(path)
-        doc = load_toml(p)  # size, encoding and syntax errors, with their line
-        text = p.read_text(encoding="utf-8")
+        text = read_toml_text(p)  # size and encoding errors; read once: the lines named are those parsed
+        doc = parse_toml(text, str(p))  # syntax errors, with their line
         for other in doc:
             if other != section and other in SECTIONS:  # an unknown section: the error of _resolve below
                 _resolve(other, text, str(path), None, None)

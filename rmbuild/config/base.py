@@ -18,6 +18,8 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
 
 from rmbuild.errors import ConfigError
+from rmbuild.io.compressed import read_at_most
+from rmbuild.limits import MAX_CONFIG_BYTES
 
 T = TypeVar("T")
 
@@ -199,17 +201,19 @@ def from_dict(cls: type[T], data: dict[str, Any], where: str = "config", prefix:
     return obj
 
 
-#: a config file is a few kB; anything this large is not one (and is not read into memory)
-MAX_CONFIG_BYTES = 1 << 20
-
-
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file into a dict; every problem is a one-line :class:`ConfigError` naming file and line."""
+    return parse_toml(read_toml_text(path), str(path))
+
+
+def read_toml_text(path: str | Path) -> str:
+    """The text of a TOML file, at most :data:`MAX_CONFIG_BYTES` (counted as it is read: a device has no size);
+    size, reading and encoding problems are a :class:`ConfigError` naming the file."""
     p = Path(path)
     try:
-        if p.stat().st_size > MAX_CONFIG_BYTES:
-            raise ConfigError(f"{p.stat().st_size:,} bytes: too large for a config file", str(p))
-        data = p.read_bytes()
+        data = read_at_most(p, MAX_CONFIG_BYTES)
+        if len(data) > MAX_CONFIG_BYTES:
+            raise ConfigError(f"more than {MAX_CONFIG_BYTES:,} bytes: too large for a config file", str(p))
     except FileNotFoundError:
         raise ConfigError("config file not found", str(p)) from None
     except IsADirectoryError:
@@ -221,7 +225,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
     except UnicodeDecodeError as e:
         line = data[: e.start].count(b"\n") + 1
         raise ConfigError(f"not UTF-8 text ({e.reason})", f"{p}:{line}") from None
-    return parse_toml(text, str(p))
+    return text
 
 
 def parse_toml(text: str, where: str) -> dict[str, Any]:

@@ -7,8 +7,11 @@ expand to GBs). Plain files are read as they are.
 
 from __future__ import annotations
 
+import errno
 import gzip
 import io
+import os
+import stat
 import zlib
 from pathlib import Path
 
@@ -55,6 +58,17 @@ class _Bounded(io.RawIOBase):
             super().close()
 
 
+def read_at_most(path: str | Path, limit: int) -> bytes:
+    """The first ``limit + 1`` bytes of the file ``path`` at most (so a result longer than ``limit`` means the
+    file is over it). The size is not taken from the file's metadata, which a pipe has not; a device (``/dev/zero``,
+    a link to one) is refused. OSError as ``open`` raises it, or "not a regular file"."""
+    with Path(path).open("rb") as fh:
+        mode = os.fstat(fh.fileno()).st_mode
+        if not (stat.S_ISREG(mode) or stat.S_ISFIFO(mode)):
+            raise OSError(errno.EINVAL, "not a regular file")
+        return fh.read(limit + 1)
+
+
 def open_binary(path: str | Path, limit: int = MAX_GUNZIP_BYTES) -> io.BufferedReader:
     """The file as a binary stream, decompressed when its name ends in .gz (at most ``limit`` bytes: past it
     a read raises :class:`ExpandsTooFar`)."""
@@ -70,10 +84,12 @@ def read_bytes(path: str | Path, limit: int, what: str = "file") -> bytes:
     p = Path(path)
     try:
         if not is_gzip_name(p):
-            if p.stat().st_size > limit:
-                raise InputError(f"{what} of {p.stat().st_size:,} bytes: at most {limit / 2**20:g} MB "
-                                 f"({limit:,} bytes) in one {what}", str(p))
-            return p.read_bytes()
+            data = read_at_most(p, limit)
+            if len(data) > limit:
+                size = p.stat().st_size
+                raise InputError(f"{what} of {f'{size:,} bytes' if size > limit else 'more bytes'}: at most "
+                                 f"{limit / 2**20:g} MB ({limit:,} bytes) in one {what}", str(p))
+            return data
         cap = min(limit, MAX_GUNZIP_BYTES)
         with gzip.open(p, "rb") as fh:
             data = fh.read(cap + 1)

@@ -17,13 +17,10 @@ import numpy as np
 
 from rmbuild.errors import InputError
 from rmbuild.io.workspace import ARTEFACTS, Workspace
+from rmbuild.limits import MAX_IMAGE_BYTES, MAX_IMAGE_PIXELS
 
 #: px; the long side of the kept image (a floor of 250 m at ~0.12 m per pixel)
 DISPLAY_MAX_PX = 2048
-#: pixels; a larger image is refused before it is decoded (bounded memory: ~400 MB as RGBA)
-MAX_IMAGE_PIXELS = 100_000_000
-#: bytes; a larger image file is refused before it is read
-MAX_IMAGE_BYTES = 256 * 1024 * 1024
 
 
 def read_image(path: str | Path) -> bytes:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from rmbuild.errors import InputError
+from rmbuild.io.compressed import read_at_most
 from rmbuild.limits import MAX_JSON_DEPTH
 
 
@@ -50,9 +51,9 @@ def read_json_file(path: str | Path, max_bytes: int, what: str) -> Any:
     """The JSON document in the file ``path`` (``what`` it is, for messages), at most ``max_bytes`` long."""
     p = Path(path)
     try:
-        if p.stat().st_size > max_bytes:
+        data = read_at_most(p, max_bytes)
+        if len(data) > max_bytes:
             raise InputError(f"{what} larger than {max_bytes / 2**20:g} MB", str(p))
-        data = p.read_bytes()
     except OSError as e:
         raise InputError(f"cannot read {what}: {e.strerror or e}", str(p)) from None
     return parse_json(data, str(p))

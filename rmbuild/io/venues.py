@@ -19,15 +19,14 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from rmbuild.config.base import load_toml
+from rmbuild.config.base import parse_toml, read_toml_text
 from rmbuild.errors import ConfigError
+from rmbuild.limits import MAX_VENUES
 
 #: a venue's name becomes a directory name: letters, digits, ``.``, ``_``, ``-``, not starting with ``.``
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,99}$")
 _HEADER = re.compile(r"^\s*\[\[\s*venue\s*\]\]\s*(#.*)?$")
 _KEYS = ("name", "inputs", "format", "config", "floorplan")
-#: venues one file may list (a sanity bound on what is read into memory)
-MAX_VENUES = 10_000
 
 
 @dataclass(frozen=True)
@@ -42,8 +41,9 @@ class Venue:
 def read_venues(path: str | Path, formats: list[str]) -> list[Venue]:
     """The venues of ``path``; ``formats``: the input format names a venue may give."""
     p = Path(path)
-    doc = load_toml(p)
-    lines = _venue_lines(p.read_text(encoding="utf-8"))
+    text = read_toml_text(p)  # read once: the lines named are those parsed
+    doc = parse_toml(text, str(p))
+    lines = _venue_lines(text)
     extra = sorted(set(doc) - {"venue"})
     if extra:
         raise ConfigError(f"unknown key {extra[0]!r}: a venues file holds [[venue]] tables only", str(p))

@@ -27,16 +27,14 @@ from rmbuild.io.compressed import read_bytes
 from rmbuild.io.floor_image import attach_image, read_image
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.io.jsonfile import read_json_file
-from rmbuild.limits import MAX_PLAN_BYTES, MAX_PLAN_SIZE_M, MAX_TRACE_BYTES
+from rmbuild.limits import MAX_FLOOR_INFO_BYTES, MAX_PLAN_BYTES, MAX_PLAN_SIZE_M, MAX_TRACE_BYTES
+from rmbuild.limits import MAX_TRACE_LINE_BYTES as MAX_LINE_BYTES
 from rmbuild.pdr import ImuSignals, accuracy_flags, rotation_vector_quat, yaw_from_quat
 
 FORMAT_NAME = "msft-ilc"
 #: files that sit beside the traces in the published layout; ignored (with a note) when passed in
 COMPANION_FILES = ("floor_info.json", "floor_image.png", "geojson_map.json")
 _DATA_LINE = re.compile(r"^\d{10,16}\tTYPE_[A-Z0-9_]+(\t|$)")
-#: bytes; a longer line is an error (the longest line of the published traces has 134 bytes, an SSID at most
-#: 32): it bounds the parsers' memory, which would otherwise grow with the longest line times the row count
-MAX_LINE_BYTES = 4096
 #: digits of a time field: unix milliseconds have 13 (16 reach the year 318857); more overflow int64
 MAX_TIME_DIGITS = 16
 
@@ -506,7 +504,7 @@ def _floor_plans(files: list[Path]) -> dict[str, dict]:
 
 def _floor_size(path: Path) -> tuple[float, float]:
     """``floor_info.json``'s ``map_info`` width and height (m): numbers in (0, MAX_PLAN_SIZE_M]."""
-    info = read_json_file(path, 1 << 20, "floor_info.json")
+    info = read_json_file(path, MAX_FLOOR_INFO_BYTES, "floor_info.json")
     m = info.get("map_info") if isinstance(info, dict) else None
     if not isinstance(m, dict):
         raise InputError('no "map_info" object with "width" and "height"', str(path))

@@ -28,7 +28,7 @@ from rmbuild.errors import InputError, one_line
 from rmbuild.io.compressed import ExpandsTooFar, open_binary
 from rmbuild.io.formats.base import RawImu, RawInput, Reader, register
 from rmbuild.io.jsonfile import read_json_file
-from rmbuild.limits import MAX_PARQUET_CELLS
+from rmbuild.limits import MAX_PARQUET_CELLS, MAX_VENUE_BYTES
 from rmbuild.pdr import ImuSignals
 
 TABLES = ("walks", "poses", "wifi", "ble", "fixes", "imu")
@@ -94,8 +94,6 @@ def _table_of(p: Path) -> str | None:
 
 #: columns; no table of the schema (nor a truth table) has more than a dozen
 MAX_COLUMNS = 1000
-#: bytes of truth/venue.json (simulate writes a few kB)
-MAX_VENUE_BYTES = 64 * 2**20
 #: cells of a numeric column that mean "no value" (NaN); string columns have none: "NA" is a walk id
 _ARROW_STR = pd.ArrowDtype(pa.string())
 #: bytes per chunk of the scan for fields starting with a space (bounded memory on any file size)
