@@ -42,11 +42,13 @@ CG_MAX_ITERATIONS = 1000
 
 
 def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
-                 rot_prior: np.ndarray, rot_sig: np.ndarray, iterations: int = ITERATIONS) -> np.ndarray:
+                 rot_prior: np.ndarray, rot_sig: np.ndarray, iterations: int = ITERATIONS,
+                 fixed: np.ndarray | None = None) -> np.ndarray:
     """Robust Gauss-Newton over rigid walk frames T (n_walks, 3) of the ``active`` walks (module docstring).
 
     ``rot_prior`` (n_walks,) rad, NaN where none; the reference walk's position is fixed, its rotation too
-    unless it has a rotation prior. Returns new T.
+    unless it has a rotation prior; ``fixed`` (n_walks,) walks whose frames do not move at all (an
+    incremental run's held map). Returns new T.
     """
     import scipy.sparse as sp  # imported here: ~0.3 s at import, which `optimize --incremental` (no refinement) skips
 
@@ -75,6 +77,8 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
         k = 3 * col[ref]
         gauge = np.zeros(nv)
         gauge[k:k + (2 if np.isfinite(rot_prior[ref]) else 3)] = 1e9
+        if fixed is not None:
+            gauge[(3 * col[np.flatnonzero(fixed & active)][:, None] + np.arange(3)).ravel()] = 1e9
         dx = _solve((A + sp.diags(gauge) + sp.identity(nv) * 1e-6).tocsc(), -g)
         if not np.all(np.isfinite(dx)):
             break
@@ -156,7 +160,7 @@ def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
 
 def refine_placed(T: np.ndarray, placed: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
                   prior: np.ndarray, heading_used: np.ndarray, rot_sig: np.ndarray, gate_m: float,
-                  walk_len: np.ndarray) -> np.ndarray:
+                  walk_len: np.ndarray, fixed: np.ndarray | None = None) -> np.ndarray:
     """Refine the placed walks on the links currently within GATE_FACTOR x ``gate_m`` (twice, re-gating).
 
     Walks shorter than SHORT_WALK_M keep their compass rotation (a tighter prior); ``prior`` is used only
@@ -169,5 +173,5 @@ def refine_placed(T: np.ndarray, placed: np.ndarray, nk: np.ndarray, nq: np.ndar
     for _ in range(2):
         d = np.linalg.norm(walks.world_xy(T, nk[both]) - walks.world_xy(T, nq[both]), axis=1)
         sel = np.flatnonzero(both)[d < gate_m * GATE_FACTOR]
-        T = refine_walks(T, placed, nk[sel], nq[sel], walks, ref, pr, rot_sig)
+        T = refine_walks(T, placed, nk[sel], nq[sel], walks, ref, pr, rot_sig, fixed=fixed)
     return T

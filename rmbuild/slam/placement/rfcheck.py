@@ -85,6 +85,8 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
         in_map = comp[check.row_walk] == 0
         judge = (comp == 0) & walks.keep
         judge[placement.reference] = False
+        if placement.fixed is not None:  # an incremental run's held map is not judged again
+            judge &= ~placement.fixed
         for w in (int(v) for v in np.flatnonzero(judge & stale)):  # only a refuted walk changes a figure
             ev, seen = check.evidence(w, xy, tree, in_map, placement.order)
             placement.rf_overlap_scans[w], placement.rf_log_lr[w] = ev.n_overlap, ev.mean_log_lr
