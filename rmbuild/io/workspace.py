@@ -162,6 +162,21 @@ MAX_WALK_FILE_STEM = 64
 _RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)), *(f"lpt{i}" for i in range(1, 10))}
 
 
+
+def parse_optimize_state(doc: Any, where: Path | str) -> OptimizeState:
+    """optimize/state.json's document as an :class:`OptimizeState`; WorkspaceError (naming ``where``) for
+    another version or a malformed document."""
+    version = doc.get("version") if isinstance(doc, dict) else None
+    if version != OPTIMIZE_STATE_VERSION:
+        raise WorkspaceError(f"{where}: state version {version!r}, this rmbuild reads version "
+                             f"{OPTIMIZE_STATE_VERSION}; re-run `rmbuild optimize --force`")
+    try:
+        return OptimizeState.from_json(doc)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise WorkspaceError(f"{where}: malformed state ({type(e).__name__}: {e}); re-run `rmbuild optimize "
+                             "--force`") from None
+
+
 def _sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
@@ -521,16 +536,7 @@ class Workspace:
         if not self.exists("optimize.state"):
             raise WorkspaceError(f"{where}: missing (optimize ran with an older rmbuild); re-run `rmbuild optimize "
                                  "--force`")
-        doc = self.read_json("optimize.state")
-        version = doc.get("version") if isinstance(doc, dict) else None
-        if version != OPTIMIZE_STATE_VERSION:
-            raise WorkspaceError(f"{where}: state version {version!r}, this rmbuild reads version "
-                                 f"{OPTIMIZE_STATE_VERSION}; re-run `rmbuild optimize --force`")
-        try:
-            return OptimizeState.from_json(doc)
-        except (KeyError, TypeError, ValueError, AttributeError) as e:
-            raise WorkspaceError(f"{where}: malformed state ({type(e).__name__}: {e}); re-run `rmbuild optimize "
-                                 "--force`") from None
+        return parse_optimize_state(self.read_json("optimize.state"), where)
 
     def read_config_text(self, stage: str) -> str | None:
         """The resolved config the stage ran with, as TOML text (None when absent)."""
