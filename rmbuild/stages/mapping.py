@@ -33,7 +33,7 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     info: dict = {"gauge": state.gauge, "left_out_walks": [],
                   "device_offsets_db": devices.nonzero(state.device_offsets_db)}
     if not cfg.include_unlinked_walks:  # walks placed neither by Wi-Fi links nor by anchors are left out
-        unlinked = set(ds.walks["walk_id"].astype(str)) - set(state.linked_walks)
+        unlinked = set(ds.poses["walk_id"].astype(str)) - set(state.linked_walks)
         info["left_out_walks"] = sorted(unlinked)
         xy[ds.poses["walk_id"].astype(str).isin(unlinked).to_numpy()] = np.nan
     ref = state.reference_walk
