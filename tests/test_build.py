@@ -269,7 +269,7 @@ def test_venues_file_errors(tmp_path: Path, text: str, problem: str) -> None:
 def test_a_floors_warnings_are_collected_not_shown(caplog) -> None:
     import logging
 
-    from rmbuild.stages.building.task import captured_warnings
+    from rmbuild.stages.common import captured_warnings
 
     log = logging.getLogger("rmbuild.stages.optimize")
     with caplog.at_level(logging.INFO, logger="rmbuild"), captured_warnings() as warnings:

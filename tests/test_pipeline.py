@@ -304,10 +304,11 @@ def test_optimize_with_anchors_file(tiny_ws: Path, tmp_path: Path, capsys) -> No
 def test_tum_text_is_one_line_per_pose_with_six_decimals() -> None:
     """t x y z qx qy qz qw per pose, each "%.6f" (as f"{v:.6f}"): planar, so z = qx = qy = 0 and the
     quaternion is the heading's half-angle."""
-    from rmbuild.stages.optimize import tum_text
+    from rmbuild.io.tum import tum_texts
 
-    poses = pd.DataFrame({"t_s": [1.5, 1234567.0000004], "x_m": [-0.0, 2.25], "y_m": [1e-7, -3.0],
-                          "heading_rad": [0.0, np.pi]})
-    assert tum_text(poses) == ("1.500000 -0.000000 0.000000 0.000000 0.000000 0.000000 0.000000 1.000000\n"
-                               "1234567.000000 2.250000 -3.000000 0.000000 0.000000 0.000000 1.000000 0.000000\n")
-    assert tum_text(poses.iloc[:0]) == ""
+    poses = pd.DataFrame({"t_s": [1.5, 1234567.0000004, 3.0], "x_m": [-0.0, 2.25, 1.0], "y_m": [1e-7, -3.0, 0.0],
+                          "heading_rad": [0.0, np.pi, 0.0]})
+    texts = tum_texts(poses, pd.Series(["a", "a", "b"]))
+    assert texts["a"] == ("1.500000 -0.000000 0.000000 0.000000 0.000000 0.000000 0.000000 1.000000\n"
+                          "1234567.000000 2.250000 -3.000000 0.000000 0.000000 0.000000 1.000000 0.000000\n")
+    assert texts["b"].startswith("3.000000 1.000000") and tum_texts(poses.iloc[:0], pd.Series([], dtype=str)) == {}

@@ -57,8 +57,9 @@ def test_report_is_self_contained(ws_report: Path, tmp_path: Path, capsys) -> No
     n_walks = len(Workspace.open(ws).read_table("data.walks"))
     assert f"Per walk: {n_walks} walks" in block and "error vs truth (m)" in block
     assert block.count("<tr>") == n_walks + 1
-    errs = [float(c) for c in re.findall(r'<td class="num">([0-9.]+)</td></tr>', block)]
+    errs = [float(c) for c in re.findall(r'<td class="num">([0-9.]+)</td><td>[^<]*</td></tr>', block)]
     assert len(errs) == n_walks and max(errs) < 5.0  # tiny venue, every walk linked: metres, not tens
+    assert block.count("<td>placed ") + block.count("<td>reference walk:") == n_walks  # why, per walk
 
 
 def test_captions_name_only_what_is_drawn(tmp_path: Path, capsys) -> None:

@@ -36,11 +36,27 @@ def shared_clock(t_s: np.ndarray, walk_ids: np.ndarray, order: Sequence[str]) ->
 
 def tum_text(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, heading_rad: np.ndarray | None = None) -> str:
     """TUM lines of planar poses (headings in rad, counter-clockwise; None: the identity rotation)."""
+    return "".join(_tum_lines(t_s, x_m, y_m, heading_rad))
+
+
+def tum_texts(poses: pd.DataFrame, walk_ids: pd.Series) -> dict[str, str]:
+    """:func:`tum_text` of each walk's rows of ``poses`` (t_s, x_m, y_m, heading_rad; ``walk_ids`` per row;
+    walks in order of first appearance), the lines formatted in one pass over all rows."""
+    lines = _tum_lines(poses["t_s"].to_numpy(float), poses["x_m"].to_numpy(float), poses["y_m"].to_numpy(float),
+                       poses["heading_rad"].to_numpy(float))
+    codes, uniq = pd.factorize(walk_ids)
+    order = np.argsort(codes, kind="stable")
+    bounds = np.r_[0, np.cumsum(np.bincount(codes[codes >= 0], minlength=len(uniq)))]
+    rows = order[len(codes) - int(bounds[-1]):].tolist()  # NaN ids (code -1) sort first: no walk
+    return {str(w): "".join([lines[i] for i in rows[bounds[k]:bounds[k + 1]]]) for k, w in enumerate(uniq)}
+
+
+def _tum_lines(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, heading_rad: np.ndarray | None) -> list[str]:
     n = len(t_s)
     th = np.zeros(n) if heading_rad is None else np.asarray(heading_rad, dtype=float)
     rows = np.column_stack([t_s, x_m, y_m, np.zeros(n), np.zeros(n), np.zeros(n), np.sin(th / 2), np.cos(th / 2)])
-    line = " ".join(["%.6f"] * 8) + "\n"
-    return "".join(line % tuple(r) for r in rows.tolist())
+    line = " ".join(["%.6f"] * 8) + "\n"  # the same text as f"{v:.6f}" per value, ~2x faster
+    return [line % tuple(r) for r in rows.tolist()]
 
 
 def read_tum(text: str) -> np.ndarray:

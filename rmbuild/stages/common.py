@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -59,3 +60,32 @@ def locked_workspace(root: str | Path, command: str, exclusive: bool = True) -> 
             if e.where is not None:
                 raise
             raise InputError(str(e), str(root)) from None
+
+
+@contextmanager
+def captured_warnings() -> Iterator[list[str]]:
+    """The warnings rmbuild logs in the block, collected instead of shown: the caller shows them with the
+    floor's name, alike whether the floor ran here or in a worker process (lesser records go on to where
+    they would have gone)."""
+    logger = logging.getLogger("rmbuild")
+    out: list[str] = []
+    shown, propagate = logger.handlers[:], logger.propagate
+
+    class Route(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if record.levelno >= logging.WARNING:
+                out.append(record.getMessage())
+                return
+            for h in shown:
+                if record.levelno >= h.level:
+                    h.handle(record)
+            if propagate:
+                logging.getLogger().handle(record)
+
+    logger.handlers[:] = [Route()]
+    logger.propagate = False
+    try:
+        yield out
+    finally:
+        logger.handlers[:] = shown
+        logger.propagate = propagate

@@ -25,7 +25,7 @@ from rmbuild.io.formats.base import RawInput, Reader
 from rmbuild.io.lock import workspace_lock
 from rmbuild.io.workspace import StageWriter, Workspace, building_report_path, check_replaceable, write_dataset
 from rmbuild.stages.building import building_report
-from rmbuild.stages.common import Progress, ensure_progress
+from rmbuild.stages.common import Progress, captured_warnings, ensure_progress
 from rmbuild.stages.view import log_workspace
 from rmbuild.types import Dataset, Fingerprints
 from rmbuild.viz.viewer import Viewer, ensure_viewer
@@ -286,7 +286,6 @@ def read_floor_folder(files: list[str], fmt: str, ingest_toml: str, pdr_toml: st
     folder holds no floor name or several floors), "built" (:func:`_build_floor`), "skipped", "notes",
     "warnings"}."""
     from rmbuild.config import load_stage_config_text
-    from rmbuild.stages.building.task import captured_warnings
 
     cfg = load_stage_config_text("ingest", ingest_toml, "[ingest] config of the build")
     pdr_cfg = load_stage_config_text("pdr", pdr_toml, "[pdr] config of the build")

@@ -217,7 +217,8 @@ def _walks_html(ws: Workspace, ds: Any, rt: Any, gauge: str | None) -> str:
     n_linked = sum(r[1] == "yes" for r in rows)
     note = ("Placed by: how optimize put the walk in the map (Wi-Fi pairs, continuity with the previous "
             "recording, ...); shared path: length of path it shares with other walks by Wi-Fi; predicted "
-            "error: optimize's own estimate of how far off its placement is")
+            "error: optimize's own estimate of how far off its placement is; why: the evidence that placed the walk "
+            "or the reason it was left out")
     if errors:
         note += f"; {errors[0].split(' (')[0]}: the mean distance after the map's fit to the building"
     return (f"<details><summary>Per walk: {len(rows)} walks, {n_linked} linked into the map "

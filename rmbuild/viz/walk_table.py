@@ -67,8 +67,10 @@ def real_errors(opt: pd.DataFrame, ds: Any, rt: Any, gauge: str | None) -> tuple
 def walk_rows(walks: pd.DataFrame, errors: tuple[str, dict[str, float]] | None
               ) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
     """(header, rows) of the table from ``optimize/walks.parquet``; the real error column only with
-    ``errors`` (an unlinked walk's real error is left out: its frame is arbitrary)."""
-    header = HEADER + ((errors[0],) if errors else ())
+    ``errors`` (an unlinked walk's real error is left out: its frame is arbitrary); the walk's ``reason``
+    last when the table has one."""
+    why = "reason" in walks  # optimize's sentence on the evidence (workspaces from before it have none)
+    header = HEADER + ((errors[0],) if errors else ()) + (("why",) if why else ())
     rows: list[tuple[str, ...]] = []
     for _, r in walks.iterrows():
         wid = str(r["walk_id"])
@@ -77,5 +79,7 @@ def walk_rows(walks: pd.DataFrame, errors: tuple[str, dict[str, float]] | None
                _num(r.get("predicted_error_m")))
         if errors:
             row += (_num(errors[1].get(wid)) if linked or bool(r.get("anchored", False)) else "—",)
+        if why:
+            row += (str(r["reason"]),)
         rows.append(row)
     return header, rows

@@ -13,8 +13,6 @@ import os
 import resource
 import socket
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +21,7 @@ from rmbuild.errors import InputError, RmbuildError, one_line
 from rmbuild.io.atomic import write_json_atomic, write_text_atomic
 from rmbuild.io.workspace import Workspace, building_report_path
 from rmbuild.stages.building import building_page, building_report
+from rmbuild.stages.common import captured_warnings
 
 #: the stage config sections a floor task needs (TOML text of each, as written next to outputs)
 TASK_SECTIONS = ("optimize", "map", "evaluate")
@@ -74,35 +73,6 @@ def why_no_evaluate(ingest_report: dict) -> str | None:
     if int(ingest_report.get("walks") or 0) < 2:
         return "a single walk: none to hold out for testing"
     return None
-
-
-@contextmanager
-def captured_warnings() -> Iterator[list[str]]:
-    """The warnings rmbuild logs in the block, collected instead of shown: the caller shows them with the
-    floor's name, alike whether the floor ran here or in a worker process (lesser records go on to where
-    they would have gone)."""
-    logger = logging.getLogger("rmbuild")
-    out: list[str] = []
-    shown, propagate = logger.handlers[:], logger.propagate
-
-    class Route(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            if record.levelno >= logging.WARNING:
-                out.append(record.getMessage())
-                return
-            for h in shown:
-                if record.levelno >= h.level:
-                    h.handle(record)
-            if propagate:
-                logging.getLogger().handle(record)
-
-    logger.handlers[:] = [Route()]
-    logger.propagate = False
-    try:
-        yield out
-    finally:
-        logger.handlers[:] = shown
-        logger.propagate = propagate
 
 
 def _optimize_summary(r: dict) -> dict:
