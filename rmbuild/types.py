@@ -168,7 +168,9 @@ class OptimizeState:
     ("se2", "floorplan", "anchors"); ``device_offsets_db``: per device, the RSS offset (dB) the Wi-Fi
     evidence took off; ``rss_exponent``: the powed representation's exponent; ``rf_model``: the RF model
     (near_mu, near_sigma, far_mu, far_sigma, dB) the Wi-Fi evidence calibrated; ``predicted_error_m``: per
-    linked walk, its predicted placement error (m)."""
+    linked walk, its predicted placement error (m); ``rf_typical_match_db``: the RF check's typical walk (the
+    median over walks of their scans' median RSS distance to the best match in another walk, dB; None when
+    not measured), which an incremental run measures its new walks' phone offsets against."""
 
     walk_ids: tuple[str, ...]
     n_nodes: int
@@ -180,6 +182,7 @@ class OptimizeState:
     rss_exponent: float
     rf_model: tuple[float, float, float, float]
     predicted_error_m: dict[str, float]
+    rf_typical_match_db: float | None = None
     version: int = OPTIMIZE_STATE_VERSION
 
     def to_json(self) -> dict:
@@ -187,7 +190,7 @@ class OptimizeState:
                 "linked_walks": list(self.linked_walks), "reference_walk": self.reference_walk,
                 "frame": self.frame, "gauge": self.gauge, "device_offsets_db": dict(self.device_offsets_db),
                 "rss_exponent": self.rss_exponent, "rf_model": list(self.rf_model),
-                "predicted_error_m": dict(self.predicted_error_m)}
+                "predicted_error_m": dict(self.predicted_error_m), "rf_typical_match_db": self.rf_typical_match_db}
 
     @staticmethod
     def from_json(doc: dict) -> OptimizeState:
@@ -200,4 +203,4 @@ class OptimizeState:
             str(doc["reference_walk"]), str(doc["frame"]), str(doc["gauge"]),
             {str(k): float(v) for k, v in doc["device_offsets_db"].items()}, float(doc["rss_exponent"]),
             (rf[0], rf[1], rf[2], rf[3]), {str(k): float(v) for k, v in doc["predicted_error_m"].items()},
-            int(doc["version"]))
+            None if doc.get("rf_typical_match_db") is None else float(doc["rf_typical_match_db"]), int(doc["version"]))

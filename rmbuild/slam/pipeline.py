@@ -111,7 +111,8 @@ def optimize(
     t0 = time.perf_counter()
     if cfg.placement.method == "grow":  # the RF check (placement/rfcheck.py) on the solved poses
         sim = wifi.scan_locator()
-        placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2])
+        placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2],
+                                   holding.state.rf_typical_match_db if holding is not None else None)
     timing["rf_check"] = time.perf_counter() - t0
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
@@ -127,6 +128,9 @@ def optimize(
         warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
     for wmsg in warnings:
         log.warning(wmsg)
+    t0 = time.perf_counter()
+    agree = _held_check(walks, placement, sources, holding, cfg) if holding is not None else None
+    timing["held_check"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_all
     cand = wifi.candidates.assign(used=wifi.used_mask())
     in_map = (walks_df["linked"] | walks_df["anchored"]).to_numpy()[walks.walk_of]  # placed in the map's frame
@@ -134,9 +138,8 @@ def optimize(
     stats["vicinity"] = {**wifi.report(), "anisotropic_pairs": int(pairs["anisotropic"].sum())}
     stats["evidence"] = {s.name: s.report() for s in sources if s is not wifi}
     stats["placement_kinds"] = report.placement_summary(walks_df[walks.keep])
-    if holding is not None:
-        stats["incremental"] = {**report.incremental_summary(walks, holding, walks_df),
-                                **_held_check(walks, placement, sources, holding, cfg).report(walks)}
+    if holding is not None and agree is not None:
+        stats["incremental"] = {**report.incremental_summary(walks, holding, walks_df), **agree.report(walks)}
     return OptimizeResult(
         state=_state(walks, placement, walks_df, wifi),
         poses=walks.poses_frame(dataset.poses, final_xyt).assign(linked=in_map),
@@ -169,7 +172,7 @@ def _state(walks: WalkSet, placement: Placement, walks_df: pd.DataFrame, wifi: W
         tuple(walks.walk_ids), walks.n, tuple(walks_df.loc[in_map, "walk_id"].astype(str)),
         walks.walk_ids[placement.reference], placement.frame, gauge, dict(wifi.compared.offsets_db),
         float(wifi.compared.beta), (rf.near_mu, rf.near_sigma, rf.far_mu, rf.far_sigma),
-        {str(w): float(e) for w, e in pred.itertuples(index=False) if np.isfinite(e)})
+        {str(w): float(e) for w, e in pred.itertuples(index=False) if np.isfinite(e)}, placement.rf_typical_match_db)
 
 
 def _reference_index(walks: WalkSet, cfg: OptimizeConfig) -> int | None:

@@ -117,6 +117,7 @@ class WifiSource(EvidenceSource):
             self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s, cfg.min_common_aps)
         c = self.candidates[self._is_cross(self.candidates)]
         self._links = Links(c["node_k"].to_numpy(), c["node_q"].to_numpy())  # the search's cross pairs
+        self._locator: ScanSimilarity | None = None
 
     # ------------------------------------------------------------------------------------ placement
     def _is_cross(self, cand: pd.DataFrame) -> np.ndarray:
@@ -127,8 +128,12 @@ class WifiSource(EvidenceSource):
         return self._links
 
     def scan_locator(self) -> ScanSimilarity:
-        thr = window_median(self.rss, self.meta, self.cfg.window_steps)
-        return ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps, self.rf)
+        """The locator (computed once: placement asks for it several times)."""
+        if self._locator is None:
+            thr = window_median(self.rss, self.meta, self.cfg.window_steps)
+            self._locator = ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps,
+                                           self.rf)
+        return self._locator
 
     # ------------------------------------------------------------------------------------ solve set-up
     def prepare(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:

@@ -117,6 +117,7 @@ class Placement:
     rf_overlap_scans: np.ndarray | None = None
     rf_log_lr: np.ndarray | None = None
     fixed: np.ndarray | None = None
+    rf_typical_match_db: float | None = None
 
     @property
     def linked(self) -> np.ndarray:
