@@ -1,23 +1,17 @@
-"""`rmbuild optimize --incremental` against a full re-run, on MS ILC floors.
+"""`optimize --incremental` after `ingest --append` against a full `optimize` of the same walks (`make bench`).
 
-Run from the repo root: ``python -m bench.bench_incremental [--floors site1/F1,site2/B1] [--share 0.2]
-[--scratch DIR] [--bytecode]``. Per floor, the traces are split in file-name order (the last ``share`` of them are the
-"new" walks): ``ingest`` the first part, ``optimize``, ``ingest --append`` the rest; the workspace is then
-copied twice and one copy runs ``optimize --incremental``, the other a full ``optimize --force`` (one after
-the other, each through the CLI). Both then run ``export-map`` and ``evaluate --localizer knn``. Recorded:
-the wall and CPU time of each optimize command (the fastest of ``--repeat`` runs) and its stage time, the
-landmark error against the waypoints (optimize's report: all walks, and the linked walks only), the kNN
-median error on the built map (evaluate), linked walk counts and how many new walks were placed. Writes
-``bench/results/incremental.json`` and ``incremental.md``. Data: ``$RMBUILD_DATASETS``, default
-``<repo>/../shared/datasets``; skips cleanly when absent. ``--before DIR``: the same commands with the code of
-another checkout too, in the same run (before/after a change). About two minutes of CPU per floor and version.
-
-Byte code: every command of one run starts in the same state. By default that is the environment's: with
-``PYTHONDONTWRITEBYTECODE=1`` and no ``__pycache__`` in the checkout, each command compiles the rmbuild
-modules it imports (~0.1 s of CPU for the incremental command's); without it, the set-up commands leave the
-byte code the timed ones use. ``--bytecode`` compiles each checkout's modules first (``compileall``, writing
-``__pycache__`` into the checkouts), as installing a package does: both commands then load cached byte code.
-The results record which.
+Run from the repo root: ``python -m bench.bench_incremental [--splits ipin-trials,ipin-reps,site1/F1,site2/B1]
+[--scratch DIR]``. Splits: IPIN 2023 -2 trials 21-24 | 25-27 and repetitions 1-2 | 3-4; two MS ILC floors
+80/20 in time order (their trace files are named by MongoDB ObjectIds, which begin with their creation
+time: file-name order is time order). Per split: ``ingest`` the old part, ``optimize``, ``ingest --append``
+the new part; the workspace is copied twice, one copy runs ``optimize --incremental`` and the other a full
+``optimize --force`` (each command timed), then ``export-map`` and ``evaluate --localizer knn``. Scored:
+the linked walks' landmark error (optimize's report, one rigid fit on the linked walks), walks placed right
+(:func:`bench.bench_real.consensus_errors`: mean waypoint error ≤ 8 m in the consensus frame), the kNN
+median on the built map, and the time (command wall time; optimize's own time). Whether the incremental run
+gave up (and ran the full optimization) is recorded with its reason. Writes bench/results/incremental.json
+and incremental.md. Data: ``$RMBUILD_DATASETS`` (default ``<repo>/../shared/datasets``); skips cleanly when
+absent.
 """
 
 from __future__ import annotations
@@ -25,210 +19,178 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from bench.bench_real import ilc_data_root
+from bench.bench_real import DEFAULT_DATASETS, consensus_errors, linked_walks, need_table, read_table, waypoint_errors
 from bench.common import RESULTS, write_result
 
-#: the issue's targets: the incremental run at least this many times faster, accuracy within this share
-SPEEDUP_TARGET = 5.0
-ACCURACY_TOLERANCE = 0.05
+#: the issue's bar: incremental within this share (or ABS_TOLERANCE_M) of the full run, this much faster on ILC
+TOLERANCE, ABS_TOLERANCE_M, SPEEDUP_TARGET = 0.10, 0.3, 3.0
+RIGHT_M = 8.0
+SPLITS = {  # name -> (folder under the data sets, ingest format, how the old part is chosen)
+    "ipin-trials": ("ipin2023/logs", "ipin", "trials"),
+    "ipin-reps": ("ipin2023/logs", "ipin", "repetitions"),
+    "site1/F1": ("msft-ilc20/data/site1/F1/path_data_files", "msft-ilc", "time"),
+    "site2/B1": ("msft-ilc20/data/site2/B1/path_data_files", "msft-ilc", "time"),
+}
 
 
-def cli(*args: str, tree: Path | None = None) -> tuple[float, float]:
-    """Run ``rmbuild ARGS -q`` through the CLI (the code of ``tree`` first on the path when given); its
-    (wall time, CPU time: user + system) in s. The CPU time moves less with the load of other processes on a
-    shared machine than the wall time, but it does: multi-threaded matrix products (the full run's) spend
-    more CPU under contention. Raises on failure."""
+def cli(*args: str) -> float:
+    """``rmbuild ARGS -q`` through the CLI; its wall time (s). Raises on failure."""
     env = {**os.environ, "MPLBACKEND": "Agg"}
-    if tree is not None:
-        env["PYTHONPATH"] = str(tree)
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "rmbuild", *args, "-q"], capture_output=True, text=True, env=env,
-                          cwd=tree)  # `python -m` puts the working directory first on the path
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run([sys.executable, "-m", "rmbuild", *args, "-q"], capture_output=True, text=True, env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"rmbuild {' '.join(args)}: {proc.stderr.strip()[-400:]}")
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return time.perf_counter() - t0
 
 
-def split_inputs(src: Path, scratch: Path, share: float) -> tuple[Path, Path, int, int]:
-    """Symlink the floor's traces into ``old/`` and ``new/`` (the last ``share`` in file-name order)."""
+def split_files(src: Path, how: str) -> tuple[list[Path], list[Path]]:
     files = sorted(src.glob("*.txt*"))
-    n_new = max(1, round(share * len(files)))
-    old, new = scratch / "old", scratch / "new"
-    for d, part in ((old, files[:-n_new]), (new, files[-n_new:])):
-        d.mkdir(parents=True)
-        for f in part:
-            (d / f.name).symlink_to(f)
-    return old, new, len(files) - n_new, n_new
+    if how == "trials":
+        old = [f for f in files if any(f"Trial{t}_" in f.name for t in (21, 22, 23, 24))]
+    elif how == "repetitions":
+        old = [f for f in files if any(f"repetition0{r}" in f.name for r in (1, 2))]
+    else:
+        old = files[:round(0.8 * len(files))]
+    return old, [f for f in files if f not in old]
 
 
-def run_floor(src: Path, scratch: Path, share: float, before: Path | None, repeat: int) -> dict:
-    """Per code version (this checkout; ``before`` too when given): the incremental and the full optimize
-    of the appended workspace, each timed ``repeat`` times (interleaved; the fastest kept), then scored."""
+def timed(base: Path, ws: Path, args: list[str]) -> float:
+    """A fresh copy of ``base`` optimised with ``args``; the command's wall time (s)."""
+    if ws.exists():
+        shutil.rmtree(ws)
+    shutil.copytree(base, ws, symlinks=True)
+    return cli("optimize", "-w", str(ws), *args)
+
+
+def run_split(src: Path, fmt: str, how: str, scratch: Path, repeat: int) -> dict:
     if scratch.exists():
         shutil.rmtree(scratch)
-    old, new, n_old, n_new = split_inputs(src, scratch, share)
+    old, new = split_files(src, how)
+    (scratch / "old").mkdir(parents=True)
+    for f in old:
+        (scratch / "old" / f.name).symlink_to(f)
     base = scratch / "base"
-    cli("ingest", str(old), "-w", str(base), "--format", "msft-ilc")
-    t_first, _ = cli("optimize", "-w", str(base))
-    cli("ingest", "--append", str(new), "-w", str(base))
-    versions = {"": None} if before is None else {"": None, "before_": before}
-    plan = [(f"{v}{name}", args, tree) for v, tree in versions.items()
-            for name, args in (("incremental", ["--incremental"]), ("full", ["--force"]))]
-    times: dict[str, list[tuple[float, float, float]]] = {name: [] for name, _, _ in plan}
-    for _ in range(repeat):
-        for name, args, tree in plan:
-            ws = scratch / name
-            if ws.exists():
-                shutil.rmtree(ws)
-            shutil.copytree(base, ws, symlinks=True)
-            load0 = os.getloadavg()[0]
-            times[name].append((*cli("optimize", "-w", str(ws), *args, tree=tree), load0))
-    runs = {name: _scored(scratch / name, times[name], tree) for name, _, tree in plan}
-    out = {"walks_old": n_old, "walks_new": n_new, "first_optimize_wall_s": round(t_first, 2), "repeat": repeat,
-           "runs": runs}
-    for v in versions:
-        inc, full = runs[f"{v}incremental"], runs[f"{v}full"]
-        out[f"{v}ratios"] = {
-            "speedup_wall": round(full["wall_s"] / inc["wall_s"], 2),
-            "speedup_cpu": round(full["cpu_s"] / inc["cpu_s"], 2),
-            "speedup_optimize": round(full["optimize_s"] / inc["optimize_s"], 2),
-            "landmark_ratio": _ratio(inc["landmark_error_m"], full["landmark_error_m"]),
-            "landmark_linked_ratio": _ratio(inc["landmark_error_linked_m"], full["landmark_error_linked_m"]),
-            "knn_median_ratio": _ratio(inc["knn_median_m"], full["knn_median_m"])}
+    cli("ingest", str(scratch / "old"), "-w", str(base), "--format", fmt)
+    cli("optimize", "-w", str(base))
+    cli("ingest", "--append", *map(str, new), "-w", str(base))
+    out: dict = {"walks_old": len(old), "walks_new": len(new), "runs": {}}
+    plan = (("incremental", ["--incremental"]), ("full", ["--force"]))
+    walls: dict[str, list[float]] = {name: [] for name, _ in plan}
+    for _ in range(repeat):  # interleaved; the fastest of each kept (other jobs share the machine)
+        for name, args in plan:
+            walls[name].append(timed(base, scratch / name, args))
+    for name, _ in plan:
+        ws = scratch / name
+        wall = min(walls[name])
+        cli("export-map", "-w", str(ws))
+        cli("evaluate", "-w", str(ws), "--localizer", "knn")
+        out["runs"][name] = {"wall_s": round(wall, 2), "all_wall_s": [round(w, 2) for w in walls[name]],
+                             **score(ws)}
+    out["first_run_walks_right"] = first_run_walks_right(scratch)
+    inc, full = out["runs"]["incremental"], out["runs"]["full"]
+    out["within_bar"] = {k: within(inc[k], full[k]) for k in ("landmark_linked_m", "knn_median_m")}
+    out["within_bar"]["placed_right"] = inc["placed_right"] >= full["placed_right"]
+    out["speedup_wall"] = round(full["wall_s"] / inc["wall_s"], 2)
+    out["speedup_optimize"] = round(full["optimize_s"] / inc["optimize_s"], 2)
     return out
 
 
-def _scored(ws: Path, times: list[tuple[float, float, float]], tree: Path | None) -> dict:
-    """The fastest of ``times`` (wall, cpu, load average before), the last run's report figures, and
-    export-map + evaluate --localizer knn on it."""
-    cli("export-map", "-w", str(ws), tree=tree)
-    cli("evaluate", "-w", str(ws), "--localizer", "knn", tree=tree)
+def score(ws: Path) -> dict:
     opt = json.loads((ws / "optimize" / "report.json").read_text())
     ev = json.loads((ws / "evaluate" / "report.json").read_text())
-    o = opt.get("optimized") or {}
+    linked = linked_walks(read_table(ws, "optimize.walks"), need_table(ws, "optimize.poses"))
+    err = consensus_errors(waypoint_errors(ws, linked))
     inc = opt.get("incremental") or {}
-    return {
-        "wall_s": round(min(t[0] for t in times), 2), "cpu_s": round(min(t[1] for t in times), 2),
-        "all_wall_s": [round(t[0], 2) for t in times], "all_cpu_s": [round(t[1], 2) for t in times],
-        "load_average_before": [t[2] for t in times],
-        "stage_s": opt["time_s"].get("stage_total"), "optimize_s": opt["time_s"].get("total"),
-        "landmark_error_m": (o.get("landmark_error_m") or {}).get("mean"),
-        "landmark_error_linked_m": (o.get("landmark_error_fitted_walks_m") or {}).get("mean"),
-        "landmark_fixes_linked": (o.get("landmark_error_fitted_walks_m") or {}).get("n"),
-        "knn_median_m": ev["maps"]["built"]["knn"]["median"], "knn_n": ev["maps"]["built"]["knn"]["n"],
-        "linked_walks": opt.get("linked_walks"), "walks": opt.get("walks"),
-        "new_walks_placed": inc.get("new_walks_placed"),
-    }
+    tried = inc.get("tried_s") or 0.0  # a run that gave up: its incremental try and the full run
+    return {"optimize_s": round(opt["time_s"].get("total") + tried, 3), "stage_s": opt["time_s"].get("stage_total"),
+            "landmark_linked_m": round((opt["optimized"].get("landmark_error_fitted_walks_m") or {}).get("mean"), 2),
+            "placed_right": int((err <= RIGHT_M).sum()), "scored": int(len(err)), "linked": len(linked),
+            "knn_median_m": round(ev["maps"]["built"]["knn"]["median"], 2),
+            "gave_up": inc.get("gave_up"), "new_walks_placed": inc.get("new_walks_placed"),
+            "held_walks": inc.get("held_walks"), "held_walks_moved": len(inc.get("held_walks_moved") or [])}
 
 
-def _ratio(a: float | None, b: float | None) -> float | None:
-    return round(a / b, 3) if a is not None and b else None
+def first_run_walks_right(scratch: Path) -> dict:
+    """The walks the first optimize linked: how many are placed right after it, after the incremental run
+    (held, so the same unless it gave up) and after the full run; in each run's own consensus frame."""
+    err = {}
+    for name in ("base", "incremental", "full"):
+        ws = scratch / name
+        err[name] = consensus_errors(waypoint_errors(ws, linked_walks(read_table(ws, "optimize.walks"),
+                                                                      need_table(ws, "optimize.poses"))))
+    first = err["base"].index
+    return {"walks": len(first), **{("first_run" if k == "base" else k): int((v.reindex(first) <= RIGHT_M).sum())
+                                    for k, v in err.items()}}
+
+
+def within(a: float, b: float) -> bool:
+    return a <= b * (1 + TOLERANCE) or a <= b + ABS_TOLERANCE_M
+
+
+def markdown(result: dict) -> str:
+    lines = ["# `optimize --incremental` after `ingest --append` vs a full optimize "
+             "(`python -m bench.bench_incremental`)",
+             "", "Old part ingested and optimised, new part appended; then the same workspace optimised with "
+             "`--incremental` and in full. Landmark: optimize's linked-walk landmark error (m, mean); right: walks "
+             f"placed right (consensus error ≤ {RIGHT_M:g} m) of the linked walks with waypoints; kNN: median (m) on "
+             "the built map; wall: the optimize command (s, the fastest of the interleaved repeats), optimize's own "
+             "time in brackets (a run that gave up: its try and the full run). Bar: within "
+             f"{TOLERANCE:.0%} (or {ABS_TOLERANCE_M} m), no fewer walks right, ≥ {SPEEDUP_TARGET:g}× faster on ILC.",
+             "", "| split | walks old + new | incremental: what ran | landmark m full / incr | right full / incr | "
+             "kNN m full / incr | wall s full / incr (optimize s) | speed-up wall (optimize) | within bar | "
+             "first run's linked walks right: first run / incr / full |", "|---" * 10 + "|"]
+    for name, r in result["splits"].items():
+        if "error" in r or "skipped" in r:
+            lines.append(f"| {name} | {r.get('error') or r.get('skipped')} | | | | | | | | |")
+            continue
+        f, i, ok = r["runs"]["full"], r["runs"]["incremental"], r["within_bar"]
+        bad = [k for k, v in ok.items() if not v]
+        fr = r["first_run_walks_right"]
+        ran = f"gave up → full ({i['gave_up']})" if i["gave_up"] else \
+            f"incremental: {i['new_walks_placed']} of {r['walks_new']} new placed on {i['held_walks']} held"
+        lines.append(f"| {name} | {r['walks_old']} + {r['walks_new']} | {ran} | {f['landmark_linked_m']:.2f} / "
+                     f"{i['landmark_linked_m']:.2f} | {f['placed_right']}/{f['scored']} / "
+                     f"{i['placed_right']}/{i['scored']} | {f['knn_median_m']:.2f} / {i['knn_median_m']:.2f} | "
+                     f"{f['wall_s']:.1f} ({f['optimize_s']:.1f}) / {i['wall_s']:.1f} ({i['optimize_s']:.1f}) | "
+                     f"{r['speedup_wall']:.1f}× ({r['speedup_optimize']:.1f}×) | "
+                     + ("yes" if not bad else "no: " + ", ".join(bad))
+                     + f" | {fr['first_run']} / {fr['incremental']} / {fr['full']} of {fr['walks']} |")
+    return "\n".join(lines) + "\n"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--floors", default="site1/F1,site2/B1")
-    ap.add_argument("--share", type=float, default=0.2)
+    ap.add_argument("--splits", default=",".join(SPLITS))
     ap.add_argument("--scratch", type=Path, default=Path("/tmp/rmbuild-bench-incremental"))
-    ap.add_argument("--before", type=Path, default=None,
-                    help="another checkout of rmbuild (e.g. `git worktree add` of an earlier commit) run beside "
-                         "this one in the same run")
-    ap.add_argument("--repeat", type=int, default=2, help="timings per command (the fastest is kept)")
-    ap.add_argument("--bytecode", action="store_true",
-                    help="byte-compile each checkout's rmbuild first (as an installed package is): every command "
-                         "then loads cached byte code")
-    args = ap.parse_args()
-    root = ilc_data_root()
+    ap.add_argument("--repeat", type=int, default=3, help="timed runs of each optimize command (the fastest kept)")
+    args = ap.parse_args([] if __name__ != "__main__" else None)
+    root = Path(os.environ.get("RMBUILD_DATASETS", DEFAULT_DATASETS))
     if not root.is_dir():
         print(f"skipped: {root} absent")
         return
-    if args.bytecode:
-        for tree in (Path(__file__).resolve().parent.parent, *([args.before.resolve()] if args.before else [])):
-            subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "rmbuild")], check=True)
-    result: dict = {"share_new": args.share, "speedup_target": SPEEDUP_TARGET,
-                    "accuracy_tolerance": ACCURACY_TOLERANCE, "before": _describe(args.before),
-                    "bytecode": _bytecode_state(args.bytecode), "floors": {}}
-    for floor in args.floors.split(","):
-        src = root / floor / "path_data_files"
+    result: dict = {"repeat": args.repeat, "tolerance": TOLERANCE, "abs_tolerance_m": ABS_TOLERANCE_M,
+                    "speedup_target": SPEEDUP_TARGET,
+                    "splits": {}}
+    for name in args.splits.split(","):
+        rel, fmt, how = SPLITS[name]
+        if not (root / rel).is_dir():
+            result["splits"][name] = {"skipped": f"{rel} absent"}
+            continue
         try:
-            result["floors"][floor] = run_floor(src, args.scratch.resolve() / floor.replace("/", "-"), args.share,
-                                                args.before.resolve() if args.before else None, args.repeat)
+            result["splits"][name] = run_split(root / rel, fmt, how, args.scratch.resolve() / name.replace("/", "-"),
+                                               args.repeat)
         except RuntimeError as e:
-            result["floors"][floor] = {"error": str(e)}
+            result["splits"][name] = {"error": str(e)}
+        print(name, json.dumps(result["splits"][name].get("runs", result["splits"][name]))[:400], flush=True)
     write_result("incremental", result)
     (RESULTS / "incremental.md").write_text(markdown(result))
     print(markdown(result))
-
-
-def _bytecode_state(compiled: bool) -> str:
-    """How the timed commands get rmbuild's byte code (the module docstring)."""
-    if compiled:
-        return "compiled beforehand"
-    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
-        return "PYTHONDONTWRITEBYTECODE set: compiled by each command unless the checkout has __pycache__"
-    return "written by the set-up commands"
-
-
-def _describe(tree: Path | None) -> str | None:
-    """The commit of the ``--before`` checkout (its path when it is not a git checkout)."""
-    if tree is None:
-        return None
-    r = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    return r.stdout.strip() if r.returncode == 0 else str(tree)
-
-
-def _f(v: float | None, fmt: str = ".2f") -> str:
-    return "" if v is None else format(v, fmt)
-
-
-def markdown(result: dict) -> str:
-    lines = ["# `optimize --incremental` vs a full re-run (`python -m bench.bench_incremental`)", "",
-             f"The last {result['share_new']:.0%} of a floor's traces appended (`ingest --append`) to a workspace "
-             "optimised on the rest; the same workspace then optimised incrementally and in full, each command "
-             "timed in turn (the fastest of the repeats kept). Wall: the command's wall time; CPU: its user + "
-             "system time (less moved by other processes on a shared machine than the wall time); core: the "
-             "optimisation itself (the report's time_s.total). Landmark error: optimize's report against the waypoints "
-             "(mean, m; all walks / linked walks only); kNN: `evaluate --localizer knn`, median error (m) on "
-             "the built map. Targets: "
-             f"≥ {result['speedup_target']:g}× faster, accuracy within {result['accuracy_tolerance']:.0%}."
-             + (f" `before`: the code at {result['before']}, run in the same run." if result.get("before") else "")
-             + (f" rmbuild's byte code: {result['bytecode']}." if result.get("bytecode") else ""),
-             "", "| floor | code | walks old + new | wall s full / incr (ratio) | CPU s full / incr (ratio) | "
-             "core s full / incr (ratio) | landmark m full / incr | linked-walk landmark m full / incr | "
-             "kNN median m full / incr | linked walks full / incr (new placed) |", "|---" * 10 + "|"]
-    for floor, r in result["floors"].items():
-        if "error" in r:
-            lines.append(f"| {floor} | {r['error']} | | | | | | | | |")
-            continue
-        for v in ("before_", ""):
-            if f"{v}ratios" not in r:
-                continue
-            f, i, q = r["runs"][f"{v}full"], r["runs"][f"{v}incremental"], r[f"{v}ratios"]
-            lines.append(
-                f"| {floor} | {v.rstrip('_') or 'this'} | {r['walks_old']} + {r['walks_new']} | "
-                f"{f['wall_s']:.1f} / {i['wall_s']:.1f} ({q['speedup_wall']:.1f}×) | "
-                f"{f['cpu_s']:.1f} / {i['cpu_s']:.1f} ({q['speedup_cpu']:.1f}×) | "
-                f"{_f(f['optimize_s'], '.1f')} / {_f(i['optimize_s'], '.1f')} ({q['speedup_optimize']:.1f}×) | "
-                f"{_f(f['landmark_error_m'])} / {_f(i['landmark_error_m'])} | "
-                f"{_f(f['landmark_error_linked_m'])} / {_f(i['landmark_error_linked_m'])} | "
-                f"{_f(f['knn_median_m'])} / {_f(i['knn_median_m'])} | {f['linked_walks']} / {i['linked_walks']} "
-                f"({i['new_walks_placed']} of {r['walks_new']}) |")
-    loads = [x for r in result["floors"].values() for run in r.get("runs", {}).values()
-             for x in run.get("load_average_before", [])]
-    if loads:
-        lines += ["", f"Load average (1 min, {os.cpu_count()} CPUs) before the timed "
-                  f"commands: {min(loads):.1f}-{max(loads):.1f}."]
-    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

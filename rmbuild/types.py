@@ -152,3 +152,55 @@ class Fingerprints:
         rss[r, c] = df["rssi_dbm"].to_numpy(dtype=np.float32)
         cnt[r, c] = df["count"].to_numpy(dtype=np.int32)
         return Fingerprints(nodes, bssids, rss, cnt)
+
+
+#: version of :class:`OptimizeState`'s file (optimize/state.json); a file of another version is refused
+OPTIMIZE_STATE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class OptimizeState:
+    """What later stages need from the last ``optimize``, typed (``report.json`` is for people and tools).
+
+    ``walk_ids``: the walks it ran on, in node order, and ``n_nodes`` their poses (a prefix of the dataset's
+    while walks are only appended); ``linked_walks``: the walks placed in the map's frame (by Wi-Fi links
+    or anchors); ``reference_walk``; ``frame`` ("reference walk", "floorplan", "anchors") and ``gauge``
+    ("se2", "floorplan", "anchors"); ``device_offsets_db``: per device, the RSS offset (dB) the Wi-Fi
+    evidence took off; ``rss_exponent``: the powed representation's exponent; ``rf_model``: the RF model
+    (near_mu, near_sigma, far_mu, far_sigma, dB) the Wi-Fi evidence calibrated; ``predicted_error_m``: per
+    linked walk, its predicted placement error (m); ``rf_typical_match_db``: the RF check's typical walk (the
+    median over walks of their scans' median RSS distance to the best match in another walk, dB; None when
+    not measured), which an incremental run measures its new walks' phone offsets against."""
+
+    walk_ids: tuple[str, ...]
+    n_nodes: int
+    linked_walks: tuple[str, ...]
+    reference_walk: str
+    frame: str
+    gauge: str
+    device_offsets_db: dict[str, float]
+    rss_exponent: float
+    rf_model: tuple[float, float, float, float]
+    predicted_error_m: dict[str, float]
+    rf_typical_match_db: float | None = None
+    version: int = OPTIMIZE_STATE_VERSION
+
+    def to_json(self) -> dict:
+        return {"version": self.version, "walk_ids": list(self.walk_ids), "n_nodes": self.n_nodes,
+                "linked_walks": list(self.linked_walks), "reference_walk": self.reference_walk,
+                "frame": self.frame, "gauge": self.gauge, "device_offsets_db": dict(self.device_offsets_db),
+                "rss_exponent": self.rss_exponent, "rf_model": list(self.rf_model),
+                "predicted_error_m": dict(self.predicted_error_m), "rf_typical_match_db": self.rf_typical_match_db}
+
+    @staticmethod
+    def from_json(doc: dict) -> OptimizeState:
+        """Raises KeyError / TypeError / ValueError on a malformed document (the workspace names the file)."""
+        rf = tuple(float(v) for v in doc["rf_model"])
+        if len(rf) != 4:
+            raise ValueError("rf_model: 4 numbers expected")
+        return OptimizeState(
+            tuple(str(w) for w in doc["walk_ids"]), int(doc["n_nodes"]), tuple(str(w) for w in doc["linked_walks"]),
+            str(doc["reference_walk"]), str(doc["frame"]), str(doc["gauge"]),
+            {str(k): float(v) for k, v in doc["device_offsets_db"].items()}, float(doc["rss_exponent"]),
+            (rf[0], rf[1], rf[2], rf[3]), {str(k): float(v) for k, v in doc["predicted_error_m"].items()},
+            None if doc.get("rf_typical_match_db") is None else float(doc["rf_typical_match_db"]), int(doc["version"]))

@@ -192,21 +192,19 @@ def test_built_positions_leave_out_walks_neither_linked_nor_anchored():
 
     poses = pd.DataFrame({"walk_id": ["a", "a", "b", "b", "c", "c"], "step": [0, 1] * 3,
                           "x_m": np.arange(6.0), "y_m": np.zeros(6)})
-    walks = pd.DataFrame({"walk_id": ["a", "b", "c"], "linked": [True, False, False],
-                          "anchored": [False, True, False]})
-    tables = {"optimize.poses": poses, "optimize.walks": walks}
-    ws = SimpleNamespace(require=lambda stage: None, read_table=tables.__getitem__, stale_inputs=lambda stage: [],
-                         read_report=lambda stage: {"gauge": "anchors", "reference_walk": "a"}, path=str)
+    from rmbuild.types import OptimizeState
+
+    # optimize's typed state: a linked by Wi-Fi, b by its anchors, c neither
+    state = OptimizeState(("a", "b", "c"), 6, ("a", "b"), "a", "anchors", "anchors", {"p": -3.0, "q": 0.0}, 1.0,
+                          (5.0, 2.0, 12.0, 3.0), {"a": 1.0})
+    ws = SimpleNamespace(require=lambda stage: None, read_table={"optimize.poses": poses}.__getitem__,
+                         stale_inputs=lambda stage: [], read_optimize_state=lambda: state, path=str)
     ds = SimpleNamespace(n_nodes=6, poses=poses)
     xy, info = built_positions(ws, ds, MapConfig())
-    assert info["left_out_walks"] == ["c"] and info["frame"] == "building"
+    assert info["left_out_walks"] == ["c"] and info["frame"] == "building" and info["device_offsets_db"] == {"p": -3.0}
     assert np.isfinite(xy[:4]).all() and np.isnan(xy[4:]).all()
     xy, info = built_positions(ws, ds, dataclasses.replace(MapConfig(), include_unlinked_walks=True))
     assert info["left_out_walks"] == [] and np.isfinite(xy).all()
-    # a workspace from before the anchored column: linked alone decides
-    tables["optimize.walks"] = walks.drop(columns="anchored")
-    xy, info = built_positions(ws, ds, MapConfig())
-    assert info["left_out_walks"] == ["b", "c"]
 
 
 def test_histogram_layer_counts_bins_and_directions():

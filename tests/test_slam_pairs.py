@@ -155,3 +155,20 @@ def test_leaf_search_finds_nearly_every_exact_neighbour(monkeypatch):
     assert len(want & got) >= 0.9 * len(want) and len(got) <= len(want)
     si, sj = leaf
     assert (meta.walk[si] != meta.walk[sj]).all() and (np.bincount(si) <= 5).all()
+
+
+def test_a_search_restricted_to_new_walks_finds_every_full_search_pair_of_theirs():
+    """An incremental run searches only the new walks' scans: every pair the full search finds with a new
+    scan is found (the mutual rule's bound for an old scan is an upper bound: a few more may be)."""
+    fp, meta = _random(n=240, m=30, n_walks=8, seed=4)
+    rm = RssMatrix.from_fingerprints(fp, -110.0)
+    cfg = SearchParams(segment_scans=2, top_k=4, run_half_scans=1, within_walk=True)
+    full = run_matched_candidates(rm, meta, cfg)
+    new = meta.walk >= 6
+    part = run_matched_candidates(rm, meta, cfg, rows=new)
+    k, q = part["row_k"].to_numpy(), part["row_q"].to_numpy()
+    assert (new[k] | new[q]).all()  # nothing between two old scans
+    fk, fq = full["row_k"].to_numpy(), full["row_q"].to_numpy()
+    touch = new[fk] | new[fq]
+    assert touch.sum() > 10
+    assert set(zip(fk[touch].tolist(), fq[touch].tolist())) <= set(zip(k.tolist(), q.tolist()))

@@ -48,9 +48,14 @@ def _summary(r: dict) -> None:
 
     f = r["factors"]
     inc = r.get("incremental")
-    if inc:
+    if inc and inc.get("gave_up"):
+        click.echo(f"incremental: gave up ({inc['gave_up']}); ran the full optimization instead")
+    elif inc:
+        again = inc["old_walks_placed_again"]
         click.echo(f"incremental: {inc['new_walks_placed']} of {len(inc['new_walks'])} new walk(s) placed against "
-                   f"the last optimize's {inc['old_walks_held']} walks (kept as they were)")
+                   f"the {inc['held_walks']} walks the last optimize linked (kept as they were)"
+                   + (f"; the {len(again)} walk(s) it left out placed again with them "
+                      f"({len(inc['old_walks_now_linked'])} now linked)" if again else ""))
     click.echo(f"optimized {r['walks']} walks / {r['poses']} poses ({r.get('poses_solved', r['poses'])} solved): "
                f"{f['odometry']} odometry, {f['vicinity']} vicinity, {f['prior']} prior factors in "
                f"{r['time_s'].get('stage_total', 0):.1f} s; {frame_text(r)}")

@@ -57,7 +57,7 @@ from rmbuild.io.layout import FLOORS_DIR, MANIFEST, MAX_MARKER_BYTES, WORKSPACE_
 from rmbuild.io.layout import is_marker as _is_marker
 from rmbuild.io.layout import read_marker as _read_marker
 from rmbuild.io.lock import holds_lock, workspace_lock
-from rmbuild.types import WIFI_COLUMNS, Dataset, Fingerprints
+from rmbuild.types import OPTIMIZE_STATE_VERSION, WIFI_COLUMNS, Dataset, Fingerprints, OptimizeState
 
 #: version of this layout; 1 kept the stage reports and checksums outside the stage directories
 SCHEMA_VERSION = 2
@@ -113,6 +113,8 @@ ARTEFACTS: dict[str, str] = {
     "optimize.tum_truth_dir": "optimize/tum/truth",
     "optimize.tum_truth_index": "optimize/tum/truth/walks.csv",
     "optimize.anchors": "optimize/anchors.parquet",
+    # the typed state later stages read (rmbuild.types.OptimizeState); report.json is for people and tools
+    "optimize.state": "optimize/state.json",
     # map
     "map.cells": "map/radiomap.parquet",
     "map.cell_table": "map/cells.parquet",
@@ -158,6 +160,21 @@ BUILDING_DIR = "building"
 MAX_WALK_FILE_STEM = 64
 #: names Windows reserves whatever the extension (a workspace may be copied there)
 _RESERVED = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)), *(f"lpt{i}" for i in range(1, 10))}
+
+
+
+def parse_optimize_state(doc: Any, where: Path | str) -> OptimizeState:
+    """optimize/state.json's document as an :class:`OptimizeState`; WorkspaceError (naming ``where``) for
+    another version or a malformed document."""
+    version = doc.get("version") if isinstance(doc, dict) else None
+    if version != OPTIMIZE_STATE_VERSION:
+        raise WorkspaceError(f"{where}: state version {version!r}, this rmbuild reads version "
+                             f"{OPTIMIZE_STATE_VERSION}; re-run `rmbuild optimize --force`")
+    try:
+        return OptimizeState.from_json(doc)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise WorkspaceError(f"{where}: malformed state ({type(e).__name__}: {e}); re-run `rmbuild optimize "
+                             "--force`") from None
 
 
 def _sha256_bytes(data: bytes) -> str:
@@ -242,6 +259,10 @@ class StageWriter:
 
     def text(self, key: str, text: str) -> None:
         self.path(key).write_text(text)
+
+    def optimize_state(self, state: OptimizeState) -> None:
+        """optimize's typed state (:class:`rmbuild.types.OptimizeState`), versioned."""
+        self.json("optimize.state", state.to_json())
 
     def binary(self, key: str, data: bytes) -> None:
         self.path(key).write_bytes(data)
@@ -506,6 +527,16 @@ class Workspace:
     def read_report(self, stage: str) -> dict | None:
         """The stage's report (None when the stage has not run)."""
         return self.read_json(f"{STAGE_DIRS[stage]}.report") if self.has(stage) else None
+
+    def read_optimize_state(self) -> OptimizeState:
+        """The last optimize's typed state. Raises WorkspaceError when optimize has not run, when its state
+        file is missing (written by an older rmbuild) or of another version, or malformed."""
+        self.require("optimize")
+        where = self.path("optimize.state")
+        if not self.exists("optimize.state"):
+            raise WorkspaceError(f"{where}: missing (optimize ran with an older rmbuild); re-run `rmbuild optimize "
+                                 "--force`")
+        return parse_optimize_state(self.read_json("optimize.state"), where)
 
     def read_config_text(self, stage: str) -> str | None:
         """The resolved config the stage ran with, as TOML text (None when absent)."""

@@ -1,7 +1,7 @@
 """The GTSAM pose graph of `rmbuild optimize` (the only package that imports gtsam).
 
 Public entry point: :func:`optimize` (pure, in-memory) returning an :class:`OptimizeResult`. Both are
-loaded on first use: importing a submodule (e.g. :mod:`rmbuild.slam.incremental`) does not import the
+loaded on first use: importing a submodule (e.g. :mod:`rmbuild.slam.held`) does not import the
 full pipeline and the modules only it needs.
 """
 

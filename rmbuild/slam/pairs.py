@@ -135,9 +135,10 @@ def _dedupe(ri: np.ndarray, rj: np.ndarray, *cols: np.ndarray):
 
 
 def median_window_pairs(
-    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None
+    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None, only: np.ndarray | None = None
 ) -> tuple[pd.DataFrame, np.ndarray]:
-    """The paper's pair rule over all row pairs; returns (pairs, d_med per row).
+    """The paper's pair rule over all row pairs (``only``, bool per row: the pairs with one of these rows);
+    returns (pairs, d_med per row).
 
     Row k proposes q when d(k, q) < d_med(k), q allowed (see :func:`_allowed`), at least
     ``min_common_aps`` shared APs; each row keeps its ``max_pairs_per_node`` closest proposals; the
@@ -148,8 +149,9 @@ def median_window_pairs(
     thr_f = np.where(np.isnan(thr), -np.inf, thr)
     out_r, out_c, out_d = [], [], []
     bs = pcfg.block_rows
-    for s in range(0, n, bs):
-        rows = np.arange(s, min(n, s + bs))
+    todo = np.arange(n) if only is None else np.flatnonzero(only)
+    for s in range(0, len(todo), bs):
+        rows = todo[s:s + bs]
         d, common = rm.block(rows)
         mask = (d < thr_f[rows][:, None]) & (common >= pcfg.min_common_aps)
         mask &= _allowed(meta, rows, slice(None), pcfg, within=True)
@@ -159,7 +161,7 @@ def median_window_pairs(
         out_c.append(c)
         out_d.append(dd)
         if progress:
-            progress("pair_search", {"done": int(rows[-1] + 1), "total": n})
+            progress("pair_search", {"done": s + len(rows), "total": len(todo)})
     r = np.concatenate(out_r) if out_r else np.zeros(0, np.int64)
     c = np.concatenate(out_c) if out_c else np.zeros(0, np.int64)
     d = np.concatenate(out_d) if out_d else np.zeros(0, np.float32)
@@ -183,9 +185,10 @@ def _segments(meta: RowMeta, seg: int) -> np.ndarray:
 
 
 def run_matched_candidates(
-    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None
+    rm: RssMatrix, meta: RowMeta, pcfg: SearchParams, progress: Progress = None, rows: np.ndarray | None = None
 ) -> pd.DataFrame:
-    """rmbuild's candidate pairs: segment top-k (mutual) then the best run-matched node pair per segment pair."""
+    """rmbuild's candidate pairs: segment top-k (mutual) then the best run-matched node pair per segment pair.
+    ``rows`` (bool per row): only the pairs with a segment of these rows' walks (:func:`restricted_neighbours`)."""
     n = len(rm)
     seg = _segments(meta, pcfg.segment_scans)
     n_seg = int(seg.max()) + 1 if n else 0
@@ -201,8 +204,11 @@ def run_matched_candidates(
     smeta = RowMeta(meta.node[first], meta.walk[first], meta.step[first],
                     np.bincount(seg, meta.t_s, n_seg) / cnt, np.bincount(seg, meta.path_m, n_seg) / cnt)
     k = min(pcfg.top_k, max(n_seg - 1, 1))
-    si, sj = segment_neighbours(srm, smeta, pcfg, k, progress)
-    if pcfg.mutual:
+    if rows is not None:
+        si, sj = restricted_neighbours(srm, smeta, pcfg, k, rows[first], progress)
+    else:
+        si, sj = segment_neighbours(srm, smeta, pcfg, k, progress)
+    if pcfg.mutual and rows is None:
         key = set((si.astype(np.int64) * n_seg + sj).tolist())
         back = np.fromiter(((b * n_seg + a) in key for a, b in zip(si.tolist(), sj.tolist())), bool, len(si))
         si, sj = si[back], sj[back]
@@ -254,6 +260,33 @@ def segment_neighbours(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: in
     return ri[rank < k], ci[rank < k]
 
 
+def restricted_neighbours(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int, new: np.ndarray,
+                          progress: Progress = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`segment_neighbours` and the mutual rule for the pairs with a ``new`` segment (bool per segment):
+    each new segment's ``k`` nearest searchable segments, kept when the pair is mutual. A new neighbour's own
+    k nearest are known; an old neighbour's k-th distance is bounded from above by its k-th nearest among every
+    SAMPLE_STRIDE-th segment (:func:`_sample_bounds`), so the rule keeps a few more pairs than the full
+    search would (the old-by-old distances are never computed)."""
+    n = len(srm)
+    rows = np.flatnonzero(new)
+    bs = max(16, min(pcfg.block_rows // 2, BLOCK_ELEMS // max(n, 1)))
+    cols = np.arange(n)
+    starts = list(range(0, len(rows), bs))
+    parts = blocks_in_parallel(lambda s: _leaf_candidates(srm, smeta, pcfg, k, rows[s:s + bs], cols), starts,
+                               _progress_of(progress, [min(len(rows), s + bs) for s in starts], len(rows)))
+    ri, ci, dd = (np.concatenate([p[i] for p in parts]) if parts else np.zeros(0) for i in range(3))
+    ri, ci = ri.astype(np.int64), ci.astype(np.int64)
+    if not pcfg.mutual or not len(ri):
+        return np.minimum(ri, ci), np.maximum(ri, ci)
+    key = set((ri * n + ci).tolist())
+    back_new = np.fromiter(((b * n + a) in key for a, b in zip(ri.tolist(), ci.tolist())), bool, len(ri))
+    old_cols = np.unique(ci[~new[ci]])
+    bound = np.full(n, np.inf, np.float32)
+    bound[old_cols] = _sample_bounds(srm, smeta, pcfg, k, bs, old_cols)
+    keep = np.where(new[ci], back_new, dd <= bound[ci])
+    return np.minimum(ri[keep], ci[keep]), np.maximum(ri[keep], ci[keep])
+
+
 def _progress_of(progress: Progress, done_after: list | np.ndarray, total: int | None = None):
     """A callback for :func:`blocks_in_parallel`: block i done -> progress("pair_search", done, total)."""
     if progress is None:
@@ -262,18 +295,20 @@ def _progress_of(progress: Progress, done_after: list | np.ndarray, total: int |
     return lambda i: progress("pair_search", {"done": int(done_after[i]), "total": total, "phase": "segments"})
 
 
-def _sample_bounds(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int, bs: int) -> np.ndarray:
-    """Each row's k-th smallest squared distance to every SAMPLE_STRIDE-th segment (inf with fewer)."""
-    n = len(srm)
-    sample = np.arange(0, n, SAMPLE_STRIDE)
-    bound = np.full(n, np.inf, np.float32)
+def _sample_bounds(srm: RssMatrix, smeta: RowMeta, pcfg: SearchParams, k: int, bs: int,
+                   rows: np.ndarray | None = None) -> np.ndarray:
+    """Each row's (of ``rows``, default all) k-th smallest squared distance to every SAMPLE_STRIDE-th segment
+    (inf with fewer)."""
+    rows = np.arange(len(srm)) if rows is None else rows
+    sample = np.arange(0, len(srm), SAMPLE_STRIDE)
+    bound = np.full(len(rows), np.inf, np.float32)
     if len(sample) <= k:
         return bound
 
     def block(s: int) -> np.ndarray:
-        return np.partition(_masked_sq(srm, smeta, np.arange(s, min(n, s + bs)), sample, pcfg), k - 1, axis=1)[:, k - 1]
+        return np.partition(_masked_sq(srm, smeta, rows[s:s + bs], sample, pcfg), k - 1, axis=1)[:, k - 1]
 
-    starts = list(range(0, n, bs))
+    starts = list(range(0, len(rows), bs))
     for s, b in zip(starts, blocks_in_parallel(block, starts)):
         bound[s:s + len(b)] = b
     return bound

@@ -29,13 +29,16 @@ from rmbuild.slam.evidence import default_sources
 from rmbuild.slam.evidence.base import StaticFactors
 from rmbuild.slam.evidence.wifi import CandidatesHook, WifiSource
 from rmbuild.slam.gauge import gauge_factors, gauge_nodes
-from rmbuild.slam.placement import Placement, gather, place
+from rmbuild.slam.held import HeldMap, Holding, hold
+from rmbuild.slam.held import reference as held_reference
+from rmbuild.slam.placement import Placement, gather, heldcheck, place
+from rmbuild.slam.placement.grow import window_lengths
 from rmbuild.slam.placement.rfcheck import refute
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.result import OptimizeResult
 from rmbuild.slam.solve import SolveOutcome
 from rmbuild.slam.solve import run as run_solves
-from rmbuild.types import Dataset, Fingerprints
+from rmbuild.types import Dataset, Fingerprints, OptimizeState
 
 log = logging.getLogger(__name__)
 Progress = Callable[[str, dict], None] | None
@@ -49,6 +52,7 @@ def optimize(
     progress: Progress = None,
     candidates_hook: CandidatesHook | None = None,
     floorplan: FloorPlan | None = None,
+    held: HeldMap | None = None,
 ) -> OptimizeResult:
     """Align all walks of ``dataset`` into one frame and optimise the pose graph (module docstring).
 
@@ -58,22 +62,30 @@ def optimize(
     :func:`tests.slam_venue.false_pairs`). Raises :class:`InputError` for no poses, no fingerprints,
     NaN in poses, a single-step walk (with ``single_step_walks = "error"``), an unknown reference walk and
     anchors of unknown walks or outside their walk's time span. Walks with no verified link to the
-    reference walk are reported (``walks.linked``, warnings).
+    reference walk are reported (``walks.linked``, warnings). ``held``: the last optimize's map (an
+    incremental run, :mod:`.held`): its linked walks are kept where they are and everything else is placed
+    and solved against them by the same steps, each source restricted to what concerns the other walks.
     """
     timing: dict[str, float] = {}
     t_all = t0 = time.perf_counter()
     walks, warnings = WalkSet.from_dataset(dataset, fingerprints, cfg.single_step_walks, cfg.compass.default_sigma_rad)
-    sources = default_sources(walks, cfg, anchors, progress, candidates_hook, floorplan)
+    holding = None
+    if held is not None:
+        walks, holding = hold(walks, held)
+    sources = default_sources(walks, cfg, anchors, progress, candidates_hook, floorplan, holding)
     wifi = sources[0]
     assert isinstance(wifi, WifiSource)
     timing["pair_search"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    placement = place(walks, sources, cfg.placement, _reference_index(walks, cfg))
+    ref = held_reference(walks, holding) if holding is not None else _reference_index(walks, cfg)
+    placement = place(walks, sources, cfg.placement, ref, holding.fixed if holding is not None else None)
     if progress:
         progress("init", {"linked": int(placement.linked.sum()), "walks": walks.n_walks})
     for s in sources:  # each source sees the poses as the sources before it left them (a plan, then anchors)
         s.place(walks, placement, walks.apply_frames(placement.world_T_walk))
+    if holding is not None:
+        placement.frame = holding.state.frame
     init_xyt = walks.apply_frames(placement.world_T_walk)
     timing["init"] = time.perf_counter() - t0
 
@@ -99,7 +111,8 @@ def optimize(
     t0 = time.perf_counter()
     if cfg.placement.method == "grow":  # the RF check (placement/rfcheck.py) on the solved poses
         sim = wifi.scan_locator()
-        placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2])
+        placement.refuted = refute(placement, walks, sim, final_xyt[sim.row_node, :2],
+                                   holding.state.rf_typical_match_db if holding is not None else None)
     timing["rf_check"] = time.perf_counter() - t0
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
@@ -115,6 +128,9 @@ def optimize(
         warnings.append("all walks are disconnected: no verified cross-walk Wi-Fi links")
     for wmsg in warnings:
         log.warning(wmsg)
+    t0 = time.perf_counter()
+    agree = _held_check(walks, placement, sources, holding, cfg) if holding is not None else None
+    timing["held_check"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_all
     cand = wifi.candidates.assign(used=wifi.used_mask())
     in_map = (walks_df["linked"] | walks_df["anchored"]).to_numpy()[walks.walk_of]  # placed in the map's frame
@@ -122,12 +138,41 @@ def optimize(
     stats["vicinity"] = {**wifi.report(), "anisotropic_pairs": int(pairs["anisotropic"].sum())}
     stats["evidence"] = {s.name: s.report() for s in sources if s is not wifi}
     stats["placement_kinds"] = report.placement_summary(walks_df[walks.keep])
+    if holding is not None and agree is not None:
+        stats["incremental"] = {**report.incremental_summary(walks, holding, walks_df), **agree.report(walks)}
     return OptimizeResult(
+        state=_state(walks, placement, walks_df, wifi),
         poses=walks.poses_frame(dataset.poses, final_xyt).assign(linked=in_map),
         initial_poses=walks.poses_frame(dataset.poses, init_xyt).assign(linked=in_map),
         pairs=pairs, candidates=cand, walks=walks_df, stats=stats, cost_history=outcome.cost_history,
         placement_log=pd.DataFrame(placement.log), solve_starts=outcome.solve_starts,
     )
+
+
+def _held_check(walks: WalkSet, placement: Placement, sources: list, holding: Holding,
+                cfg: OptimizeConfig) -> heldcheck.HeldCheck:
+    """Whether the walks placed agree with the held map (:mod:`rmbuild.slam.placement.heldcheck`)."""
+    links, rot, _, _ = gather(sources, walks)
+    lk, lq = links.node_k, links.node_q
+    if placement.links is not None:
+        lk, lq = np.r_[lk, placement.links[0]], np.r_[lq, placement.links[1]]
+    moves = heldcheck.held_move(walks, placement, lk, lq, rot, cfg.placement.gate_m,
+                                window_lengths(walks, cfg.placement))
+    pred = np.array([holding.state.predicted_error_m.get(w, np.nan) for w in walks.walk_ids])
+    return heldcheck.check(walks, placement, moves, pred)
+
+
+def _state(walks: WalkSet, placement: Placement, walks_df: pd.DataFrame, wifi: WifiSource) -> OptimizeState:
+    """What later stages need from this run (:class:`rmbuild.types.OptimizeState`)."""
+    in_map = walks_df["linked"] | walks_df["anchored"]
+    rf = wifi.rf
+    pred = walks_df.loc[walks_df["linked"], ["walk_id", "predicted_error_m"]]
+    gauge = {"anchors": "anchors", "floorplan": "floorplan"}.get(placement.frame, "se2")
+    return OptimizeState(
+        tuple(walks.walk_ids), walks.n, tuple(walks_df.loc[in_map, "walk_id"].astype(str)),
+        walks.walk_ids[placement.reference], placement.frame, gauge, dict(wifi.compared.offsets_db),
+        float(wifi.compared.beta), (rf.near_mu, rf.near_sigma, rf.far_mu, rf.far_sigma),
+        {str(w): float(e) for w, e in pred.itertuples(index=False) if np.isfinite(e)}, placement.rf_typical_match_db)
 
 
 def _reference_index(walks: WalkSet, cfg: OptimizeConfig) -> int | None:

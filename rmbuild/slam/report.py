@@ -7,6 +7,7 @@ import pandas as pd
 
 from rmbuild.slam.checks import CheckResult
 from rmbuild.slam.evidence.base import Ties
+from rmbuild.slam.held import Holding
 from rmbuild.slam.placement import Placement
 from rmbuild.slam.problem import COVERED_BIN_M, WalkSet
 from rmbuild.slam.solve import SolveOutcome
@@ -106,6 +107,8 @@ def _reason(row, group_move: dict | None, component_size: int) -> str:
           if np.isfinite(row.rf_log_lr) else "")
     if how == "reference":
         return f"reference walk: the map's frame is its own{error}"
+    if how == "held":
+        return f"held: placed by the last optimize and kept where it was (an incremental run){error}"
     if how in ("translation", "se2", "pair"):
         fit = {"translation": "a translation (compass heading)", "se2": "a rigid fit (own rotation)",
                "pair": "a walk-pair fit"}[how]
@@ -128,6 +131,18 @@ def _reason(row, group_move: dict | None, component_size: int) -> str:
     group = (f" with {component_size - 1} other walk(s) placed against it" if component_size > 1 else "")
     return (f"left out: no verified link to the map{group} ({row.n_cross_pairs} Wi-Fi pairs with "
             f"{row.n_partner_walks} other walk(s))")
+
+
+def incremental_summary(walks: WalkSet, holding: Holding, table: pd.DataFrame) -> dict:
+    """What an incremental run placed: the new walks (placed or not), the held walks, and the old walks the
+    last optimize left out, which were placed again with the new ones (now linked or not)."""
+    linked = table["linked"].to_numpy(bool)
+    ids = np.asarray(walks.walk_ids, dtype=object)
+    new = ~holding.old & walks.keep
+    redo = holding.old & ~holding.fixed & walks.keep
+    return {"new_walks": ids[~holding.old].tolist(), "new_walks_placed": int((new & linked).sum()),
+            "held_walks": int(holding.fixed.sum()), "old_walks_placed_again": ids[redo].tolist(),
+            "old_walks_now_linked": ids[redo & linked].tolist()}
 
 
 def placement_summary(table: pd.DataFrame) -> dict:

@@ -1,4 +1,4 @@
-"""What :func:`rmbuild.slam.optimize` (and :func:`rmbuild.slam.incremental.optimize_incremental`) return."""
+"""What :func:`rmbuild.slam.optimize` returns."""
 
 from __future__ import annotations
 
@@ -6,10 +6,12 @@ from dataclasses import dataclass, field
 
 import pandas as pd
 
+from rmbuild.types import OptimizeState
+
 
 @dataclass
 class OptimizeResult:
-    """What :func:`rmbuild.slam.optimize` returns (and the incremental run, in the same form).
+    """What :func:`rmbuild.slam.optimize` returns (a full or an incremental run).
 
     ``poses`` / ``initial_poses``: walk_id, step, t_s, x_m, y_m, heading_rad in the common frame (the
     reference walk's own frame, or the building frame with anchors), and ``linked`` (the walk is placed in
@@ -22,6 +24,7 @@ class OptimizeResult:
     ``walks``: per walk (:func:`rmbuild.slam.report.walk_table`).
     ``placement_log``: one row per walk-to-map fit the placement tried (phase, round, walk, accepted, ...).
     ``solve_starts``: index into ``cost_history`` of each solve's first entry.
+    ``state``: what later stages need (:class:`rmbuild.types.OptimizeState`, written as optimize/state.json).
     ``stats``: factor counts, costs, iterations, time_s per phase, cost_history, warnings, ... (JSON-able).
     """
 
@@ -31,6 +34,7 @@ class OptimizeResult:
     candidates: pd.DataFrame
     walks: pd.DataFrame
     stats: dict
+    state: OptimizeState
     cost_history: list[float] = field(default_factory=list)
     placement_log: pd.DataFrame = field(default_factory=pd.DataFrame)
     solve_starts: list[int] = field(default_factory=list)

@@ -21,13 +21,15 @@ from rmbuild.config.optimize import OptimizeConfig
 from rmbuild.slam import schedule
 from rmbuild.slam.chains import add_chain_odometry, fill_chains, keyframe_mask
 from rmbuild.slam.evidence.base import EvidenceSource, SolveState
-from rmbuild.slam.factors import poses_to_values, values_to_poses
+from rmbuild.slam.factors import X, poses_to_values, values_to_poses
 from rmbuild.slam.scale import scaled_raw, update_scales
 from rmbuild.slam.schedule import SolveSchedule
 
 log = logging.getLogger(__name__)
 Progress = Callable[[str, dict], None] | None
 
+# m and rad; 1-sigma of the prior that keeps a held node (an incremental run's map) where it is
+HOLD_SIGMA = 1e-3
 # steps; the chain reduction keeps at least one node every this many steps (long chains linearise badly)
 KEYFRAME_MAX_GAP = 20
 # poses; below this COLAMD orders the elimination (METIS pays off on big graphs, ~3x at 50k poses); gtsam
@@ -75,26 +77,42 @@ class SolveOutcome:
 
 
 class _Graph:
-    """Odometry over the keyframes, from the current scaled dead reckoning, plus the static factors."""
+    """Odometry over the keyframes of the solved walks (``solved``: kept, not held), from the current scaled
+    dead reckoning, plus the static factors; held nodes (``base``: the poses they keep) get a tight prior
+    where a factor touches them, and a factor that touches held nodes only is left out (it cannot move
+    anything)."""
 
-    def __init__(self, walks, kf: np.ndarray, static: list, cfg: OptimizeConfig):
-        self.walks, self.kf, self.cfg = walks, kf, cfg
+    def __init__(self, walks, kf: np.ndarray, static: list, cfg: OptimizeConfig, fixed: np.ndarray, base: np.ndarray):
+        self.walks, self.kf, self.cfg, self.base = walks, kf, cfg, base
+        self.solved = walks.keep & ~fixed
         self.kf_idx = np.flatnonzero(kf)
+        held = self.kf_idx[fixed[walks.walk_of[self.kf_idx]]]
+        self.held_keys = {X(int(i)) for i in held.tolist()}
         self.static = gtsam.NonlinearFactorGraph()
-        for f in static:
+        hold = gtsam.noiseModel.Isotropic.Sigma(3, HOLD_SIGMA)
+        for i in held.tolist():
+            self.static.add(gtsam.PriorFactorPose2(X(i), gtsam.Pose2(*base[i]), hold))
+        for f in self.free(static):
             self.static.add(f)
         self.set_scale(walks.raw)
+
+    def free(self, factors: list) -> list:
+        """The factors that touch a node not held."""
+        if not self.held_keys:
+            return factors
+        return [f for f in factors if any(k not in self.held_keys for k in f.keys())]
 
     def set_scale(self, raw_s: np.ndarray) -> None:
         w = self.walks
         self.raw_s = raw_s
         self.odo = gtsam.NonlinearFactorGraph()
-        self.n_odo = add_chain_odometry(self.odo, raw_s, w.starts[w.keep], w.ends[w.keep], self.kf, self.cfg.odometry)
+        self.n_odo = add_chain_odometry(self.odo, raw_s, w.starts[self.solved], w.ends[self.solved], self.kf,
+                                        self.cfg.odometry)
 
     def build(self, factors: list) -> gtsam.NonlinearFactorGraph:
         g = gtsam.NonlinearFactorGraph(self.odo)
         g.push_back(self.static)
-        for f in factors:
+        for f in self.free(factors):
             g.add(f)
         return g
 
@@ -103,18 +121,20 @@ class _Graph:
 
     def from_values(self, v: gtsam.Values) -> np.ndarray:
         w = self.walks
-        full = np.zeros((w.n, 3))
+        full = self.base.copy()
         # the solve's values hold exactly the keyframes' Pose2s, in key order X(kf_idx[0]) < X(kf_idx[1]) < ...
         full[self.kf_idx] = gtsam.utilities.extractPose2(v) if v.size() == len(self.kf_idx) else \
             values_to_poses(v, nodes=self.kf_idx)
-        return fill_chains(full, self.raw_s, w.starts[w.keep], w.ends[w.keep], self.kf)
+        return fill_chains(full, self.raw_s, w.starts[self.solved], w.ends[self.solved], self.kf)
 
 
-def keyframes(walks, required: np.ndarray, chain_reduction: bool) -> np.ndarray:
-    """bool (n,): the nodes the solve keeps."""
+def keyframes(walks, required: np.ndarray, chain_reduction: bool, fixed: np.ndarray) -> np.ndarray:
+    """bool (n,): the nodes the solve keeps: the solved walks' keyframes and the ``required`` nodes of the
+    ``fixed`` (held) walks."""
+    solved = walks.keep & ~fixed
     if not chain_reduction:
-        return np.ones(walks.n, bool)
-    return keyframe_mask(walks.n, walks.starts[walks.keep], walks.ends[walks.keep], required, KEYFRAME_MAX_GAP)
+        return solved[walks.walk_of] | required
+    return keyframe_mask(walks.n, walks.starts[solved], walks.ends[solved], required, KEYFRAME_MAX_GAP)
 
 
 def levenberg_marquardt(graph, values, cfg: OptimizeConfig, history: list, progress: Progress, outer: int,
@@ -154,8 +174,9 @@ def run(walks, placement, init_xyt: np.ndarray, sources: list[EvidenceSource], s
     """Solve the pose graph from ``init_xyt`` as the schedule says (module docstring)."""
     req = np.zeros(walks.n, bool)
     req[required] = True
-    kf = keyframes(walks, req, cfg.solve.chain_reduction)
-    graph = _Graph(walks, kf, static, cfg)
+    fixed = placement.fixed if placement.fixed is not None else np.zeros(walks.n_walks, bool)
+    kf = keyframes(walks, req, cfg.solve.chain_reduction, fixed)
+    graph = _Graph(walks, kf, static, cfg, fixed, init_xyt)
     ocfg = cfg.odometry
     iterative = len(graph.kf_idx) >= ITERATIVE_MIN_KEYFRAMES
     sched = SolveSchedule(cfg.solve.outer_iterations, ocfg.estimate_scale, schedule.SCALE_ROUNDS_MAX)
@@ -211,9 +232,10 @@ def _scale_round(walks, placement, sources, graph: _Graph, sched: SolveSchedule,
     pairs = [s.pairs_near(current) for s in sources]
     pk = np.concatenate([p[0] for p in pairs])
     pq = np.concatenate([p[1] for p in pairs])
-    eligible = walks.keep & placement.linked
+    eligible = graph.solved & placement.linked
     new_scale, fitted = update_scales(current, walks.raw, walks.starts, walks.ends, scale, eligible, pk, pq,
-                                      walks.walk_of, cfg.odometry, normalize=placement.n_anchors == 0)
+                                      walks.walk_of, cfg.odometry,
+                                      normalize=placement.n_anchors == 0 and placement.fixed is None)
     out.scale_fitted |= fitted
     moved = sched.scale_done(float(np.max(np.abs(new_scale - scale), initial=0.0)))
     settling = np.abs(new_scale - scale) > schedule.SCALE_EXTEND_MOVE

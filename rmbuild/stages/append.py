@@ -23,6 +23,9 @@ from rmbuild.types import Dataset, Fingerprints
 
 log = logging.getLogger(__name__)
 
+#: a new walk whose Wi-Fi readings are less than this share of access points the workspace's walks have seen
+#: looks foreign (another venue, another floor): ingest --append warns
+FOREIGN_KNOWN_SHARE = 0.3
 #: report keys that are counts over the walks (summed over the old and the new part)
 COUNT_KEYS = ("walks", "poses", "readings", "readings_dropped_outside_walk", "scans", "fixes")
 
@@ -61,6 +64,10 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
                 w.binary("data.floor_image", ws.read_bytes("data.floor_image"))
         w.config(ws.read_config_text("ingest") or "")
         report = _report(ws.read_report("ingest") or {}, ds, fp, new.dataset, inputs, new.reader)
+        report["appended"][-1]["shared_aps"], foreign = shared_aps(old, new.dataset)
+        if foreign:
+            log.warning(foreign)
+            report.setdefault("warnings", []).append(foreign)
         if plan is not None:
             said: list[str] = []
             report["floorplan"] = plan_summary(plan, ds, said)
@@ -69,6 +76,29 @@ def run(inputs: list[str | Path], workspace: str | Path, fmt: str | None = None,
         report["time_s"] = {"total": round(time.perf_counter() - t0, 3)}
         w.report = report
     return report
+
+
+def shared_aps(old: Dataset, new: Dataset) -> tuple[dict, str | None]:
+    """How much the new walks' Wi-Fi has in common with the workspace's: per new walk, the share of its
+    readings of access points (BSSIDs) the old walks have seen; and a warning naming the new walks below
+    FOREIGN_KNOWN_SHARE (another venue or floor?), None when there is none or either side has no Wi-Fi."""
+    known = set(old.wifi["bssid"].astype(str))
+    if not known or not len(new.wifi):
+        return {"compared": False}, None
+    seen = new.wifi["bssid"].astype(str).isin(known)
+    per_walk = seen.groupby(new.wifi["walk_id"].astype(str), sort=False).mean()
+    low = per_walk[per_walk < FOREIGN_KNOWN_SHARE]
+    figures = {"compared": True, "new_aps": int(new.wifi["bssid"].nunique()),
+               "new_aps_known": int(new.wifi.loc[seen, "bssid"].nunique()), "readings_known_share":
+               round(float(seen.mean()), 3), "walks_below_share": len(low)}
+    if not len(low):
+        return figures, None
+    names = ", ".join(low.index[:3]) + (", ..." if len(low) > 3 else "")
+    return figures, (f"{len(low)} of {len(per_walk)} new walk(s) ({names}) hear mostly access points this workspace "
+                     f"has never seen (under {FOREIGN_KNOWN_SHARE:.0%} of their Wi-Fi readings; all new walks: "
+                     f"{seen.mean():.0%}, {figures['new_aps_known']} of {figures['new_aps']} access points known): "
+                     "another venue or floor? (compared: the BSSIDs of the new walks' readings against the "
+                     "workspace's)")
 
 
 def _check_new_ids(old: Dataset, new: Dataset, inputs: list[str | Path]) -> None:

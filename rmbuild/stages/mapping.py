@@ -29,19 +29,14 @@ def built_positions(ws: Workspace, ds: Dataset, cfg: MapConfig) -> tuple[np.ndar
     if len(poses) != ds.n_nodes or not (poses["walk_id"].to_numpy() == ds.poses["walk_id"].to_numpy()).all():
         raise InputError(f"{ws.path('optimize.poses')}: does not match the ingested poses; re-run `rmbuild optimize`")
     xy = poses[["x_m", "y_m"]].to_numpy(dtype=float).copy()
-    report = ws.read_report("optimize") or {}
-    walks = ws.read_table("optimize.walks")
-    info: dict = {"gauge": report.get("gauge", "se2"), "left_out_walks": [],
-                  "device_offsets_db": devices.nonzero((report.get("vicinity") or {}).get("device_offsets_db"))}
-    if "linked" in walks and not cfg.include_unlinked_walks:
-        # walks placed neither by Wi-Fi links nor by anchors are left out
-        placed = walks["linked"].astype(bool)
-        if "anchored" in walks:
-            placed |= walks["anchored"].astype(bool)
-        unlinked = set(walks.loc[~placed, "walk_id"].astype(str))
+    state = ws.read_optimize_state()
+    info: dict = {"gauge": state.gauge, "left_out_walks": [],
+                  "device_offsets_db": devices.nonzero(state.device_offsets_db)}
+    if not cfg.include_unlinked_walks:  # walks placed neither by Wi-Fi links nor by anchors are left out
+        unlinked = set(ds.poses["walk_id"].astype(str)) - set(state.linked_walks)
         info["left_out_walks"] = sorted(unlinked)
         xy[ds.poses["walk_id"].astype(str).isin(unlinked).to_numpy()] = np.nan
-    ref = report.get("reference_walk")
+    ref = state.reference_walk
     info["frame"] = "building" if info["gauge"] in BUILDING_FRAME_GAUGES else f"walk:{ref}" if ref else "reference walk"
     return xy, info
 

@@ -56,23 +56,31 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     t0 = time.perf_counter()
     ds = ws.read_dataset(readings=False)  # the optimisation works from the fingerprints
     fp = ws.read_fingerprints()
-    if incremental:
-        return _run_incremental(ws, ds, fp, cfg, anchors_path is not None, progress, viewer, t0)
-    from rmbuild.slam import optimize  # the full pipeline's modules: not imported by an incremental run
+    from rmbuild.slam import optimize
 
-    anchors = None
+    held = _held_map(ws, anchors_path is not None) if incremental else None
+    anchor_table = ws.read_table("optimize.anchors") if held is not None and ws.exists("optimize.anchors") else None
     if anchors_path is not None:
         from rmbuild.io.anchors import check_anchors, read_anchors
 
         anchors = read_anchors(anchors_path)
         check_anchors(anchors, ds, cfg.anchors.max_gap_s)
-    ws.check_can_write("optimize", force)
+        anchor_table = anchors.table
+    if held is None:
+        ws.check_can_write("optimize", force)
     on_progress = _progress_adapter(progress, viewer)
-    anchor_table = anchors.table if anchors is not None else None
     plan, plan_check = _floor_plan(ws, cfg, ds)
-    result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress, floorplan=plan)
-    has_anchors = anchor_table is not None and len(anchor_table) > 0
-    gauge = "anchors" if has_anchors else "floorplan" if result.stats.get("frame") == "floorplan" else "se2"
+    result = optimize(ds, fp, cfg, anchors=None if held else anchor_table, progress=on_progress, floorplan=plan,
+                      held=held)
+    gave_up = (result.stats.get("incremental") or {}).get("gave_up")
+    if gave_up:  # the new walks disagree with the held map: the full method's answer instead
+        log.warning("--incremental: %s; running the full optimization instead", gave_up)
+        checked = {**result.stats["incremental"], "tried_s": round(result.stats["time_s"]["total"], 4)}
+        result = optimize(ds, fp, cfg, anchors=anchor_table, progress=on_progress, floorplan=plan)
+        result.stats["incremental"] = checked  # time_s: the full run's; tried_s: the incremental try's
+        result.stats["warnings"] = [f"--incremental gave up: {gave_up}; the full optimization ran instead",
+                                    *result.stats.get("warnings", [])]
+    gauge = result.state.gauge
     if plan_check is not None:
         result.stats["floorplan_check"] = plan_check
         result.stats["warnings"] = [*result.stats.get("warnings", []), *([plan_check["warning"]]
@@ -80,16 +88,23 @@ def _run(ws: Workspace, cfg: OptimizeConfig, anchors_path: str | Path | None, pr
     return _write(ws, ds, cfg, result, gauge, anchor_table, progress, viewer, t0)
 
 
-def _run_incremental(ws: Workspace, ds, fp, cfg: OptimizeConfig, anchors_given: bool, progress: Progress,
-                     viewer: Viewer, t0: float) -> dict:
-    """``--incremental``: the new walks placed against the last optimize's solution; written like a full run."""
-    from rmbuild.slam.incremental import optimize_incremental
-    from rmbuild.stages.incremental import previous_solution
+def _held_map(ws: Workspace, anchors_given: bool):
+    """``--incremental``: the last optimize's map (its typed state and poses) the new walks are placed
+    against. Raises InputError when there is none, when nothing was appended since, or with ``--anchors``
+    (the map's frame is the last run's)."""
+    from rmbuild.slam.held import HeldMap
 
-    prev = previous_solution(ws, anchors_given)
-    result = optimize_incremental(ds, fp, cfg, prev, progress=_progress_adapter(progress, viewer))
-    prev_anchors = ws.read_table("optimize.anchors") if ws.exists("optimize.anchors") else None
-    return _write(ws, ds, cfg, result, prev.report.get("gauge", "se2"), prev_anchors, progress, viewer, t0)
+    if anchors_given:
+        raise InputError("--incremental keeps the last optimize's frame: --anchors apply to a full "
+                         "`rmbuild optimize --force`")
+    if not ws.has("optimize"):
+        raise InputError("--incremental needs an earlier optimize of this workspace to add walks to; run "
+                         "`rmbuild optimize` first", str(ws.root))
+    if "ingest" not in ws.stale_inputs("optimize"):
+        raise InputError("the last optimize already ran on this workspace's current walks: nothing to add "
+                         "(append walks with `rmbuild ingest --append` first)", str(ws.root))
+    poses = ws.read_table("optimize.poses")
+    return HeldMap(ws.read_optimize_state(), poses[["x_m", "y_m", "heading_rad"]].to_numpy(float))
 
 
 def _write(ws: Workspace, ds, cfg: OptimizeConfig, result, gauge: str, anchor_table: pd.DataFrame | None,
@@ -141,6 +156,7 @@ def _write(ws: Workspace, ds, cfg: OptimizeConfig, result, gauge: str, anchor_ta
                              tum_texts(ds.truth_poses, ds.truth_poses["walk_id"].astype(str)), ".txt")
         if anchor_table is not None:
             w.table("optimize.anchors", anchor_table)
+        w.optimize_state(result.state)
         w.config(to_toml(cfg, "optimize"))
         report["time_s"]["stage_total"] = round(time.perf_counter() - t0, 3)
         w.report = report

@@ -74,7 +74,7 @@ def log_workspace(ws: Workspace, viewer: Viewer, progress: Progress | None = Non
     if ws.has("optimize") and "optimize" not in stale:
         t = step("optimize")
         opt = ws.read_table("optimize.poses")
-        gauge = (ws.read_report("optimize") or {}).get("gauge")
+        gauge = ws.read_optimize_state().gauge if ws.exists("optimize.state") else None
         rt = frame_to_truth(opt, ds.truth_poses, gauge)
         if rt is None and ds.truth_poses is None:  # real data: the waypoints place the map in the building
             rt = frame_to_fixes(opt[opt["linked"].astype(bool)] if "linked" in opt else opt, ds.fixes, gauge)

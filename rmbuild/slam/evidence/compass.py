@@ -18,6 +18,7 @@ from rmbuild import geometry
 from rmbuild.config.optimize import CompassConfig
 from rmbuild.slam.evidence.base import EvidenceSource, RotationPriors, StaticFactors
 from rmbuild.slam.factors import X
+from rmbuild.slam.held import Holding
 from rmbuild.slam.problem import WalkSet
 
 # steps; correlation length of the indoor magnetic disturbance (samples this far apart count as independent)
@@ -36,11 +37,16 @@ class CompassSource(EvidenceSource):
 
     name = "compass"
 
-    def __init__(self, walks: WalkSet, cfg: CompassConfig):
+    def __init__(self, walks: WalkSet, cfg: CompassConfig, holding: Holding | None = None):
+        """``holding``: a held map (:mod:`rmbuild.slam.held`): its walks share one rotation, the map frame's
+        in the compass world (the circular mean over them), and get no heading priors (they do not move)."""
         self.warnings: list[str] = []
         self.cfg = cfg
         self.walks = walks
         theta, known, sigma = walk_rotations(walks)
+        self.fixed = holding.fixed if holding is not None else np.zeros(walks.n_walks, bool)
+        if (self.fixed & known).any():
+            theta = np.where(self.fixed, geometry.circular_mean(theta[self.fixed & known]), theta)
         self.priors = RotationPriors(theta, known & walks.keep & cfg.use, sigma)
         self.nodes = np.zeros(0, np.int64)
 
@@ -58,7 +64,7 @@ class CompassSource(EvidenceSource):
             return out
         world_rot = self.priors.theta[placement.reference] - placement.frame_rotation
         nodes = []
-        for w in np.flatnonzero(placement.heading_known):
+        for w in np.flatnonzero(placement.heading_known & ~self.fixed):
             idx = np.arange(walks.starts[w], walks.ends[w], HEADING_PRIOR_EVERY_N)
             idx = idx[np.isfinite(walks.yaw_abs[idx])]
             nodes.append(idx)

@@ -29,6 +29,7 @@ from rmbuild import geometry
 from rmbuild.floorplan import FloorPlan, correlate_points
 from rmbuild.slam.evidence.base import EvidenceSource, RotationPriors, SolveState, Update
 from rmbuild.slam.factors import X
+from rmbuild.slam.held import Holding
 from rmbuild.slam.problem import WalkSet
 
 # m; raster cell of the translation search, and how softly a pose outside walkable space still counts
@@ -65,7 +66,10 @@ class FloorPlanSource(EvidenceSource):
 
     name = "floorplan"
 
-    def __init__(self, walks: WalkSet, plan: FloorPlan, rot: RotationPriors):
+    def __init__(self, walks: WalkSet, plan: FloorPlan, rot: RotationPriors, holding: Holding | None = None):
+        """``holding``: a held map (:mod:`rmbuild.slam.held`) already in the plan's frame: nothing is moved
+        into it; the walkable space only holds the other walks."""
+        self.holding = holding
         self.warnings: list[str] = []
         self.plan = plan
         self.walks = walks
@@ -78,6 +82,9 @@ class FloorPlanSource(EvidenceSource):
 
     def place(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:
         """Move the components into the plan's frame (module docstring)."""
+        if self.holding is not None:
+            self.used = self.holding.state.frame == "floorplan"
+            return
         ref = placement.reference
         if not self.rot.known[ref]:
             self.warnings.append("floor plan: the reference walk has no compass heading; the map is not put "

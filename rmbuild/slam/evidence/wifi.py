@@ -30,6 +30,7 @@ from rmbuild.slam.factors import (
     vicinity_factor,
     vicinity_noise,
 )
+from rmbuild.slam.held import Holding
 from rmbuild.slam.pairs import RowMeta, SearchParams, median_window_pairs, run_matched_candidates, window_median
 from rmbuild.slam.problem import WalkSet
 from rmbuild.slam.rfmodel import RFModel, calibrate
@@ -82,23 +83,29 @@ class WifiSource(EvidenceSource):
 
     name = "wifi"
 
-    def __init__(self, walks: WalkSet, cfg: WifiConfig, progress=None, candidates_hook: CandidatesHook | None = None):
+    def __init__(self, walks: WalkSet, cfg: WifiConfig, progress=None, candidates_hook: CandidatesHook | None = None,
+                 holding: Holding | None = None):
+        """``holding``: a held map (:mod:`rmbuild.slam.held`): the search looks only for pairs with a scan of
+        a walk not held, the scans are compared as the held map's were (its RSS exponent) and its RF model
+        is kept; pairs between two held walks never join the pool."""
         self.warnings: list[str] = []
         self.cfg = cfg
         self.walks = walks
+        self.fixed = holding.fixed if holding is not None else np.zeros(walks.n_walks, bool)
         self.density = walks.scan_density()
         line = sparse_scans_warning(*self.density)
         self.warnings += [line] if line else []
-        self.compared = powed.compared(walks, cfg)
+        self.compared = powed.compared(walks, cfg, holding.state.rss_exponent if holding is not None else None)
         fp = self.compared.fingerprints
         self.rss = RssMatrix.from_fingerprints(fp, cfg.fill_dbm)
         self.meta = RowMeta(fp.node, walks.walk_of[fp.node], walks.step[fp.node], walks.t_s[fp.node],
                             walks.path[fp.node])
         params = search_params(cfg)
+        only = ~self.fixed[self.meta.walk] if holding is not None else None
         if cfg.search == "median_window":
-            cand, _ = median_window_pairs(self.rss, self.meta, params, progress)
+            cand, _ = median_window_pairs(self.rss, self.meta, params, progress, only)
         else:
-            cand = run_matched_candidates(self.rss, self.meta, params, progress)
+            cand = run_matched_candidates(self.rss, self.meta, params, progress, only)
         cand["node_k"] = fp.node[cand["row_k"].to_numpy()]
         cand["node_q"] = fp.node[cand["row_q"].to_numpy()]
         cand = cand.drop(columns=["row_k", "row_q"])
@@ -106,10 +113,11 @@ class WifiSource(EvidenceSource):
         if candidates_hook is not None:
             cand = candidates_hook(cand, walks)
         self.candidates = cand.reset_index(drop=True)
-        self.rf = calibrate(self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s,
-                            cfg.min_common_aps)
+        self.rf = RFModel(*holding.state.rf_model, 0, 0) if holding is not None else calibrate(
+            self.rss, self.meta.walk, walks.raw[fp.node, :2], self.meta.path_m, self.meta.t_s, cfg.min_common_aps)
         c = self.candidates[self._is_cross(self.candidates)]
         self._links = Links(c["node_k"].to_numpy(), c["node_q"].to_numpy())  # the search's cross pairs
+        self._locator: ScanSimilarity | None = None
 
     # ------------------------------------------------------------------------------------ placement
     def _is_cross(self, cand: pd.DataFrame) -> np.ndarray:
@@ -120,8 +128,12 @@ class WifiSource(EvidenceSource):
         return self._links
 
     def scan_locator(self) -> ScanSimilarity:
-        thr = window_median(self.rss, self.meta, self.cfg.window_steps)
-        return ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps, self.rf)
+        """The locator (computed once: placement asks for it several times)."""
+        if self._locator is None:
+            thr = window_median(self.rss, self.meta, self.cfg.window_steps)
+            self._locator = ScanSimilarity(self.rss, self.walks.fingerprints.node, thr, self.cfg.min_common_aps,
+                                           self.rf)
+        return self._locator
 
     # ------------------------------------------------------------------------------------ solve set-up
     def prepare(self, walks: WalkSet, placement, init_xyt: np.ndarray) -> None:
@@ -151,6 +163,7 @@ class WifiSource(EvidenceSource):
                 ok_within = ~cross & (d_raw < gate)
                 pool |= ok_within
                 first |= ok_within
+        pool &= ~(self.fixed[walks.walk_of[nk]] & self.fixed[walks.walk_of[nq]])  # held-held: no information
         self.pool_idx = np.flatnonzero(pool)
         self.pk, self.pq = nk[self.pool_idx], nq[self.pool_idx]
         self.active = first[self.pool_idx]

@@ -56,15 +56,18 @@ def gather(sources: list[EvidenceSource], walks: WalkSet) -> tuple[Links, Rotati
     return links, rot, sim, tie
 
 
-def place(walks: WalkSet, sources: list[EvidenceSource], cfg: PlacementConfig, reference: int | None) -> Placement:
-    """Every walk's initial frame (module docstring)."""
+def place(walks: WalkSet, sources: list[EvidenceSource], cfg: PlacementConfig, reference: int | None,
+          fixed: np.ndarray | None = None) -> Placement:
+    """Every walk's initial frame (module docstring). ``fixed`` (n_walks,): an incremental run's held walks,
+    in the reference's component from the start at their (identity) frames and never moved; growth, merges
+    and ties then extend that map (``reference`` must be one of them)."""
     links, rot, sim, ties = gather(sources, walks)
     if cfg.method == "origin":
         return origin_placement(walks, links, reference)
     cnt = np.bincount(np.r_[walks.walk_of[links.node_k], walks.walk_of[links.node_q]],
                       minlength=walks.n_walks).astype(float)
     edges = pair_edges(walks, links, rot, cfg.min_shared_se2_m)
-    ctx = (walks, links, rot, sim, ties, cfg, cnt, [(e.a, e.b, e.T) for e in edges if e.accepted])
+    ctx = (walks, links, rot, sim, ties, cfg, cnt, [(e.a, e.b, e.T) for e in edges if e.accepted], fixed)
     if reference is not None:
         res = _grow_from(reference, *ctx)
     else:
@@ -81,10 +84,10 @@ def place(walks: WalkSet, sources: list[EvidenceSource], cfg: PlacementConfig, r
 
 
 def _grow_from(ref: int, walks: WalkSet, links: Links, rot: RotationPriors, sim, ties: Ties,
-               cfg: PlacementConfig, cnt: np.ndarray, edges: list) -> Placement:
-    """One growth (links, scan rounds, merges) from the reference walk ``ref``."""
+               cfg: PlacementConfig, cnt: np.ndarray, edges: list, fixed: np.ndarray | None) -> Placement:
+    """One growth (links, scan rounds, merges) from the reference walk ``ref`` (or the ``fixed`` walks)."""
     log: list[dict] = []
-    st = GrowState.empty(walks.n_walks, ref, rot.known)
+    st = GrowState.empty(walks.n_walks, ref, rot.known, fixed)
     st = grow(st, PairEvidence(walks, links.node_k, links.node_q, edges, cfg), walks, rot, cfg, cnt, log)
     lk_all, lq_all = [], []
 
@@ -108,7 +111,7 @@ def _grow_from(ref: int, walks: WalkSet, links: Links, rot: RotationPriors, sim,
     scan_links = (np.concatenate(lk_all), np.concatenate(lq_all)) if lk_all else None
     return Placement(st.T, st.comp, ref, st.heading_used & rot.known, st.method, links=scan_links,
                      gate_m=cfg.gate_m, log=log, round_placed=st.rnd, n_inliers=st.n_inl, shared_m=st.shared,
-                     order=st.order)
+                     order=st.order, fixed=fixed)
 
 
 def origin_placement(walks: WalkSet, links: Links, reference: int | None) -> Placement:

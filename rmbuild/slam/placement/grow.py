@@ -138,7 +138,7 @@ def grow(st: GrowState, ev: GrowthEvidence, walks: WalkSet, rot: RotationPriors,
                 ev.placed(st, w, f, prior, rot)
             nk, nq = ev.refine_links()
             st.T = refine_placed(st.T, placed, nk, nq, walks, seed, prior, st.heading_used, rot.sigma, cfg.gate_m,
-                                 wlen)
+                                 wlen, st.fixed)
             _distrust_outliers(st, placed, prior, rot.sigma)
         c_id += 1
         free = walks.keep & (st.comp < 0)
@@ -158,9 +158,10 @@ class PairEvidence(GrowthEvidence):
         self.rng = np.random.default_rng(RANSAC_SEED)
 
     def start_component(self, st: GrowState, seed: int, c_id: int) -> np.ndarray:
-        placed = np.zeros(self.walks.n_walks, bool)
-        placed[seed] = True
-        st.seed(seed, c_id)
+        placed = st.comp == c_id  # an incremental run's held map is component 0 from the start
+        if not placed.any():
+            placed[seed] = True
+            st.seed(seed, c_id)
         return placed
 
     def placed(self, st: GrowState, w: int, f: WalkFit, prior: np.ndarray, rot: RotationPriors) -> None:
@@ -230,7 +231,7 @@ class ScanEvidence(GrowthEvidence):
     def restart(self, st: GrowState, rot: RotationPriors) -> GrowState:
         """A state that keeps component 0 of ``st`` (the map to extend) and frees every other walk."""
         start = st.comp == 0
-        st2 = GrowState.empty(self.walks.n_walks, st.reference, rot.known)
+        st2 = GrowState.empty(self.walks.n_walks, st.reference, rot.known, st.fixed)
         for a in ("T", "rnd", "n_inl", "shared", "method", "heading_used", "order"):
             getattr(st2, a)[start] = getattr(st, a)[start]
         st2.epoch = st.epoch

@@ -48,7 +48,7 @@ def merge_components(st: GrowState, walks: WalkSet, nk: np.ndarray, nq: np.ndarr
         return st, False
     placed = st.comp == 0
     st.T = refine_placed(st.T, placed, nk, nq, walks, st.reference, compass_priors(rot, st.reference),
-                         st.heading_used, rot.sigma, cfg.gate_m, window_lengths(walks, cfg))
+                         st.heading_used, rot.sigma, cfg.gate_m, window_lengths(walks, cfg), st.fixed)
     _, st.comp = np.unique(st.comp, return_inverse=True)  # renumber the rest 1, 2, ... in their old order
     return st, True
 

@@ -37,12 +37,18 @@ class GrowState:
     reference: int
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     epoch: int = 0
+    fixed: np.ndarray | None = None  # (n_walks,) walks held where they are (an incremental run's map), or None
 
     @staticmethod
-    def empty(n_walks: int, reference: int, heading_known: np.ndarray) -> GrowState:
-        return GrowState(np.zeros((n_walks, 3)), np.full(n_walks, -1), np.full(n_walks, -1),
-                         np.zeros(n_walks, np.int64), np.zeros(n_walks), np.full(n_walks, "", dtype=object),
-                         heading_known.copy(), reference, np.full(n_walks, -1, np.int64))
+    def empty(n_walks: int, reference: int, heading_known: np.ndarray, fixed: np.ndarray | None = None) -> GrowState:
+        """Nothing placed; the ``fixed`` walks (an incremental run's held map) already in component 0 at the
+        identity frame, placed by one event."""
+        st = GrowState(np.zeros((n_walks, 3)), np.full(n_walks, -1), np.full(n_walks, -1),
+                       np.zeros(n_walks, np.int64), np.zeros(n_walks), np.full(n_walks, "", dtype=object),
+                       heading_known.copy(), reference, np.full(n_walks, -1, np.int64), fixed=fixed)
+        if fixed is not None:
+            st.comp[fixed], st.rnd[fixed], st.method[fixed], st.order[fixed] = 0, 0, "held", st.tick()
+        return st
 
     def tick(self) -> int:
         """Start a new placement event (the walks placed next share it)."""
@@ -61,7 +67,8 @@ class GrowState:
 
     def copy(self) -> GrowState:
         return GrowState(self.T.copy(), self.comp.copy(), self.rnd.copy(), self.n_inl.copy(), self.shared.copy(),
-                         self.method.copy(), self.heading_used.copy(), self.reference, self.order.copy(), self.epoch)
+                         self.method.copy(), self.heading_used.copy(), self.reference, self.order.copy(), self.epoch,
+                         self.fixed)
 
 
 @dataclass
@@ -80,7 +87,8 @@ class Placement:
     ``anchored``; without anchors each component's root gets a full gauge prior.
     ``edge_fits``: (tested, accepted) walk-pair fits; ``log``: one record per fit tried (diagnostics);
     ``round_placed`` / ``n_inliers`` / ``shared_m`` (n_walks,): the growth round a walk was placed in (-1
-    never, 0 for seeds), its inlier scans and shared path (m) then; ``refuted`` the walks the RF check
+    never, 0 for seeds), its inlier scans and shared path (m) then; ``fixed`` (n_walks,) the walks an
+    incremental run held where they were (None in a full run); ``refuted`` the walks the RF check
     (:mod:`.rfcheck`) took out of the reference component, ``rf_overlap_scans`` / ``rf_log_lr`` (n_walks,) the
     check's figures; ``order`` (n_walks,) the placement event that put each walk where it is
     (:class:`GrowState`).
@@ -108,6 +116,8 @@ class Placement:
     order: np.ndarray | None = None
     rf_overlap_scans: np.ndarray | None = None
     rf_log_lr: np.ndarray | None = None
+    fixed: np.ndarray | None = None
+    rf_typical_match_db: float | None = None
 
     @property
     def linked(self) -> np.ndarray:

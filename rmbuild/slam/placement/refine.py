@@ -42,26 +42,30 @@ CG_MAX_ITERATIONS = 1000
 
 
 def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
-                 rot_prior: np.ndarray, rot_sig: np.ndarray, iterations: int = ITERATIONS) -> np.ndarray:
+                 rot_prior: np.ndarray, rot_sig: np.ndarray, iterations: int = ITERATIONS,
+                 fixed: np.ndarray | None = None) -> np.ndarray:
     """Robust Gauss-Newton over rigid walk frames T (n_walks, 3) of the ``active`` walks (module docstring).
 
     ``rot_prior`` (n_walks,) rad, NaN where none; the reference walk's position is fixed, its rotation too
-    unless it has a rotation prior. Returns new T.
+    unless it has a rotation prior; ``fixed`` (n_walks,) walks whose frames do not move at all (an
+    incremental run's held map). Returns new T.
     """
     import scipy.sparse as sp  # imported here: ~0.3 s at import, which `optimize --incremental` (no refinement) skips
 
     T = T.copy()
-    act = np.flatnonzero(active)
-    if len(act) < 2 and not np.isfinite(rot_prior[ref]):
+    held = fixed & active if fixed is not None else np.zeros(len(T), bool)
+    var = active & ~held  # the unknowns; held walks' links count, their frames are constants
+    act = np.flatnonzero(var)
+    if not len(act) or (len(act) < 2 and not np.isfinite(rot_prior[ref]) and not held.any()):
         return T
     col = np.full(len(T), -1)
     col[act] = np.arange(len(act))
     nv = 3 * len(act)
     walk_of = walks.walk_of
     wa, wb = walk_of[nk], walk_of[nq]
-    keep = active[wa] & active[wb] & (wa != wb)
+    keep = active[wa] & active[wb] & (wa != wb) & (var[wa] | var[wb])
     nk, nq, wa, wb = nk[keep], nq[keep], wa[keep], wb[keep]
-    pw = np.flatnonzero(active & np.isfinite(rot_prior))
+    pw = np.flatnonzero(var & np.isfinite(rot_prior))
     for _ in range(iterations):
         J, res, w = linearise(T, nk, nq, wa, wb, col, nv, walks)
         e = geometry.wrap(T[pw, 2] - rot_prior[pw]) / rot_sig[pw]
@@ -71,10 +75,12 @@ def refine_walks(T: np.ndarray, active: np.ndarray, nk: np.ndarray, nq: np.ndarr
         w = np.r_[w, 1.0 / (1.0 + (np.abs(e) / ROBUST_C) ** 2)]
         A = (J.T @ sp.diags(w) @ J).tocsr()
         g = J.T @ (w * res)
-        # gauge: reference position (and rotation without a prior); tiny damping for unconnected walks
-        k = 3 * col[ref]
+        # gauge: reference position (and rotation without a prior), unless held walks fix the frame; tiny
+        # damping for unconnected walks
         gauge = np.zeros(nv)
-        gauge[k:k + (2 if np.isfinite(rot_prior[ref]) else 3)] = 1e9
+        if col[ref] >= 0 and not held.any():
+            k = 3 * col[ref]
+            gauge[k:k + (2 if np.isfinite(rot_prior[ref]) else 3)] = 1e9
         dx = _solve((A + sp.diags(gauge) + sp.identity(nv) * 1e-6).tocsc(), -g)
         if not np.all(np.isfinite(dx)):
             break
@@ -150,13 +156,15 @@ def linearise(T, nk, nq, wa, wb, col, nv, walks: WalkSet):
     # x rows: +t_ax, -t_bx, +(-ra_y) th_a, -(-rb_y) th_b ; y rows: +t_ay, -t_by, +ra_x th_a, -rb_x th_b
     vals = np.r_[np.ones(m), -np.ones(m), -ra[:, 1], np.ones(m), -np.ones(m), ra[:, 0], rb[:, 1],
                  np.zeros(m), -rb[:, 0], np.zeros(m)] / PAIR_SIGMA_M
-    J = sp.coo_matrix((vals, (rows, cols)), shape=(2 * m, nv)).tocsr()
+    va, vb = col[wa] >= 0, col[wb] >= 0  # a held walk's frame is a constant: no column
+    on = np.r_[va, vb, va, va, vb, va, vb, vb, vb, vb]
+    J = sp.coo_matrix((vals[on], (rows[on], cols[on])), shape=(2 * m, nv)).tocsr()
     return J, np.r_[r[:, 0], r[:, 1]], np.r_[wr, wr]
 
 
 def refine_placed(T: np.ndarray, placed: np.ndarray, nk: np.ndarray, nq: np.ndarray, walks: WalkSet, ref: int,
                   prior: np.ndarray, heading_used: np.ndarray, rot_sig: np.ndarray, gate_m: float,
-                  walk_len: np.ndarray) -> np.ndarray:
+                  walk_len: np.ndarray, fixed: np.ndarray | None = None) -> np.ndarray:
     """Refine the placed walks on the links currently within GATE_FACTOR x ``gate_m`` (twice, re-gating).
 
     Walks shorter than SHORT_WALK_M keep their compass rotation (a tighter prior); ``prior`` is used only
@@ -169,5 +177,5 @@ def refine_placed(T: np.ndarray, placed: np.ndarray, nk: np.ndarray, nq: np.ndar
     for _ in range(2):
         d = np.linalg.norm(walks.world_xy(T, nk[both]) - walks.world_xy(T, nq[both]), axis=1)
         sel = np.flatnonzero(both)[d < gate_m * GATE_FACTOR]
-        T = refine_walks(T, placed, nk[sel], nq[sel], walks, ref, pr, rot_sig)
+        T = refine_walks(T, placed, nk[sel], nq[sel], walks, ref, pr, rot_sig, fixed=fixed)
     return T

@@ -63,15 +63,22 @@ OFFSET_MAX_COLUMNS = 20_000
 OVERLAP_MAX_NEIGHBOURS = 32
 
 
-def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> list[int]:
+def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None,
+           typical_match_db: float | None = None) -> list[int]:
     """Walks of the reference component whose placement the RF check contradicts, worst first: each is moved
     into a component of its own (unlinked, kept where it is) and the rest judged again without it, as walks
     placed onto a wrong one agree with it. Each walk is judged against the walks placed before it
     (``placement.order``; all the others when the placement has no order).
     Returns them in that order. The reference walk is kept. ``row_xy``: each fingerprint row's position
     (default: where the placement puts it). Each judged walk's last figure goes to ``placement.rf_overlap_scans``
-    / ``placement.rf_log_lr`` (a refuted walk's: the one that refuted it; NaN for walks not judged)."""
-    check = OverlapCheck(walks, sim)
+    / ``placement.rf_log_lr`` (a refuted walk's: the one that refuted it; NaN for walks not judged).
+    An incremental run's held walks (``placement.fixed``) are not judged; with ``typical_match_db`` (the held
+    map's typical walk, :attr:`OverlapCheck.typical_db`) their phone offsets are not computed either. The
+    typical walk's figure goes to ``placement.rf_typical_match_db``."""
+    fixed = placement.fixed
+    check = OverlapCheck(walks, sim, ~fixed if fixed is not None and typical_match_db is not None else None,
+                         typical_match_db)
+    placement.rf_typical_match_db = check.typical_db
     comp = placement.component
     xy = walks.world_xy(placement.world_T_walk, sim.row_node) if row_xy is None else row_xy
     tree = cKDTree(xy)  # every row; the positions stay while walks are refuted, only the map's walks change
@@ -85,6 +92,8 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
         in_map = comp[check.row_walk] == 0
         judge = (comp == 0) & walks.keep
         judge[placement.reference] = False
+        if placement.fixed is not None:  # an incremental run's held map is not judged again
+            judge &= ~placement.fixed
         for w in (int(v) for v in np.flatnonzero(judge & stale)):  # only a refuted walk changes a figure
             ev, seen = check.evidence(w, xy, tree, in_map, placement.order)
             placement.rf_overlap_scans[w], placement.rf_log_lr[w] = ev.n_overlap, ev.mean_log_lr
@@ -106,8 +115,11 @@ def refute(placement, walks: WalkSet, sim, row_xy: np.ndarray | None = None) -> 
 class OverlapCheck:
     """The RF check of fits against the placed scans (module docstring)."""
 
-    def __init__(self, walks: WalkSet, sim):
+    def __init__(self, walks: WalkSet, sim, only: np.ndarray | None = None, typical_db: float | None = None):
+        """``only`` (n_walks,): the walks whose phone offsets are needed (default all), measured against
+        ``typical_db`` (default: the median over them)."""
         self.walks, self.sim = walks, sim
+        self.only, self.typical_db = only, typical_db
         self.row_walk = walks.walk_of[sim.row_node]
         self.rows_of = [np.flatnonzero(self.row_walk == w) for w in range(walks.n_walks)]
         self.sampled = len(self.row_walk) >= SAMPLED_MIN_ROWS
@@ -119,6 +131,8 @@ class OverlapCheck:
         typical walk's: a phone with another gain looks far from everything, wherever it is placed."""
         best = np.full(self.walks.n_walks, np.nan)
         rows_of = self.rows_of
+        if self.only is not None:  # an incremental run: only the walks to judge
+            rows_of = [rw if self.only[w] else rw[:0] for w, rw in enumerate(rows_of)]
         if self.sampled:
             rows_of = [rw[np.unique(np.linspace(0, len(rw) - 1, OFFSET_SAMPLE_ROWS).astype(np.int64))] if len(rw)
                        else rw for rw in rows_of]
@@ -126,11 +140,16 @@ class OverlapCheck:
             rows = np.concatenate(rows_of)
             dmin[rows] = self._sampled_match(rows)
         else:
-            dmin = self._best_other_walk_match()
+            dmin = self._best_other_walk_match() if self.only is None else np.full(len(self.row_walk), np.inf)
+            if self.only is not None and any(len(rw) for rw in rows_of):
+                rows = np.concatenate(rows_of)
+                dmin[rows] = self._match_of(rows)
         for w, rw in enumerate(rows_of):
             if len(rw) and (self.row_walk != w).any():
                 best[w] = float(np.median(dmin[rw])) if np.isfinite(dmin[rw]).any() else np.nan
-        off = best - np.nanmedian(best) if np.isfinite(best).any() else best
+        if self.typical_db is None:
+            self.typical_db = float(np.nanmedian(best)) if np.isfinite(best).any() else None
+        off = best - self.typical_db if self.typical_db is not None else best
         return np.where(np.isfinite(off), np.maximum(off, 0.0), 0.0)
 
     def _best_other_walk_match(self) -> np.ndarray:
@@ -148,6 +167,12 @@ class OverlapCheck:
             if sym:  # eq. 9 is symmetric: the block's columns take their minimum over its rows too
                 out[lo:] = np.minimum(out[lo:], d.min(axis=0))
         return out
+
+    def _match_of(self, rows: np.ndarray) -> np.ndarray:
+        """For ``rows``, the RSS distance (dB) of their most similar row of another walk (inf if none)."""
+        step = max(1, OFFSET_BLOCK_ELEMS // max(len(self.row_walk), 1))
+        return np.concatenate([self._other_walk_distances(rows[lo:lo + step], slice(None)).min(axis=1)
+                               for lo in range(0, len(rows), step)])
 
     def _sampled_match(self, rows: np.ndarray) -> np.ndarray:
         """For ``rows``, the RSS distance (dB) of the most similar of every k-th row (OFFSET_MAX_COLUMNS at most)
