@@ -138,7 +138,7 @@ def markdown(result: dict) -> str:
     body = "\n".join(md_row(r) for r in result["rows"])
     return (f"# Real floors with fewer Wi-Fi scans (`python -m bench.bench_scan_rate`)\n\nCode: "
             f"{result['code'].get('commit', '?')}; written on {result['date']}. Policies and columns: the "
-            f"script's docstring and `bench/results/real_after.md`.\n\n{head}\n{body}\n")
+            f"script's docstring and `bench/results/real.md`.\n\n{head}\n{body}\n")
 
 
 def main(argv: list[str] | None = None) -> int:
