@@ -224,3 +224,12 @@ def test_localize_geojson_needs_a_georeferenced_map(venue: dict, capsys, tmp_pat
     assert np.all(np.abs(pts - [2.35, 48.85]).max(axis=0) < 0.01)  # within a kilometre of the origin
     assert {f["properties"]["floor"] for f in fc["features"]} == {"plan"}
     assert {f["properties"]["walk"] for f in fc["features"]} == set(venue["new_ids"])
+
+
+def test_the_summary_counts_the_held_walks_among_the_placed() -> None:
+    from rmbuild.cli.optimize import _kinds
+
+    line = _kinds({"held": {"walks": 47, "median_predicted_error_m": 21.1},
+                   "wifi": {"walks": 8, "median_predicted_error_m": 3.2}, "left out": {"walks": 3}})
+    assert "the last optimize (held) 47 walk(s) (median predicted error 21.1 m)" in line
+    assert "Wi-Fi fits 8 walk(s)" in line and "left out: 3 walk(s)" in line

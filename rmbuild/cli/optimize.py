@@ -127,8 +127,9 @@ def _linked(r: dict) -> str | None:
 
 
 #: placement kinds (slam/report.py:placement_summary) as the summary names them
-KIND_NAMES = {"reference": "reference", "wifi": "Wi-Fi fits", "merge": "group merges",
-              "continuity": "continuity ties", "floorplan": "the floor plan", "anchor": "anchors alone"}
+KIND_NAMES = {"reference": "reference", "held": "the last optimize (held)", "wifi": "Wi-Fi fits",
+              "merge": "group merges", "continuity": "continuity ties", "floorplan": "the floor plan",
+              "anchor": "anchors alone"}
 
 
 def _kinds(kinds: dict) -> str:
