@@ -188,8 +188,8 @@ def write_summary(results: Path = RESULTS) -> Path:
              "with other jobs: compare ratios measured in one run (each benchmark says how it repeats them).", ""]
     lines += summary_lines(results)
     lines += ["", "Localizer accuracy per test bed: `localizers.md`; real floors: `real.md` (the current "
-              "code; `real_base.md` the baseline of the placement-precision work); the real floors with fewer Wi-Fi scans: "
-              "`scan_rate.md`.", ""]
+              "code; `real_base.md` the baseline of the placement-precision work); the real floors with "
+              "fewer Wi-Fi scans: `scan_rate.md`.", ""]
     p = results / "SUMMARY.md"
     p.write_text("\n".join(lines))
     return p
