@@ -246,9 +246,11 @@ def _markdown(res: dict) -> str:
     ex = res.get("exponents", {})
     if ex:
         rows += ["", f"growth exponent per phase, {ex['from_to'][0]:,} -> {ex['from_to'][1]:,} poses (target <= "
-                 f"{TARGETS['exponent']}; placement's growth loop is being replaced: reported apart):", "",
-                 "| " + " | ".join(REPORTED) + " |", "|" + "---|" * len(REPORTED),
-                 "| " + " | ".join(str(ex["end_to_end"][p]) for p in REPORTED) + " |"]
+                 f"{TARGETS['exponent']}), and between consecutive sizes:", "",
+                 "| poses | " + " | ".join(REPORTED) + " |", "|" + "---|" * (len(REPORTED) + 1),
+                 "| all | " + " | ".join(str(ex["end_to_end"][p]) for p in REPORTED) + " |"]
+        rows += [f"| {s['from_to'][0]:,} -> {s['from_to'][1]:,} | " + " | ".join(str(s[p]) for p in REPORTED) + " |"
+                 for s in ex["steps"]]
     return "\n".join(rows) + "\n"
 
 

@@ -91,7 +91,8 @@ def _within(rss, rows: np.ndarray, cols: np.ndarray, dot: np.ndarray, common: np
     ok = lim >= rss.sq[cols].astype(np.float32)[None, :]
     del lim
     ok &= common >= min_common
-    return np.nonzero(ok)
+    i, j = np.nonzero(ok)
+    return i, j
 
 
 def _keep_nearest(best_d: np.ndarray, best_c: np.ndarray, rows: np.ndarray, i: np.ndarray, c: np.ndarray,
