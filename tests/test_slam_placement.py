@@ -413,3 +413,37 @@ def test_rf_check_offsets_from_the_upper_triangle_equal_the_full_pass(monkeypatc
     np.testing.assert_array_equal(sym._best_other_walk_match(), full._best_other_walk_match())
     np.testing.assert_array_equal(sym.offset_db, full.offset_db)
     assert full.offset_db[2] > 3.0  # the loud phone's walk
+
+
+def test_knn_merge_keeps_every_neighbour_within_threshold_as_the_full_block():
+    """The kNN merge's screened block (grow._within, eq. 9 only where the screen keeps an entry) leaves each
+    scan the same neighbours within its threshold, at the same distances, as the whole block ranked."""
+    from rmbuild.slam.placement.grow import KNN_K, _keep_nearest, _within
+    from rmbuild.slam.rss import RssMatrix
+
+    rng = np.random.default_rng(3)
+    n, m = 600, 40
+    seen = rng.random((n, m)) < 0.4
+    a = np.where(seen, rng.uniform(5, 60, (n, m)), 0).astype(np.float32)
+    b = seen.astype(np.float32)
+    rss = RssMatrix(a, b, np.einsum("ij,ij->i", a, a, dtype=np.float64), b.sum(axis=1, dtype=np.float64))
+    rows, cols = np.arange(200), np.arange(200, n)
+    full, common = rss.block(rows, cols)
+    full[common < 3] = np.inf
+    thr = np.quantile(full[np.isfinite(full)], 0.03) * rng.uniform(0.5, 1.5, len(rows))
+    best_d = np.full((n, KNN_K), np.inf, np.float32)
+    best_c = np.full((n, KNN_K), -1, np.int64)
+    for part in np.array_split(cols, 4):  # new scans merged in rounds, as growth does
+        bound = np.minimum(thr, best_d[rows, KNN_K - 1])
+        dot, com = rss.products(rows, part)
+        i, j = _within(rss, rows, part, dot, com, bound, 3)
+        r, c = rows[i], part[j]
+        d = rss.distance(rss.cnt[r], rss.cnt[c], rss.sq[r], rss.sq[c], dot[i, j], com[i, j])
+        ok = d <= bound[i]
+        _keep_nearest(best_d, best_c, rows, i[ok], c[ok], d[ok])
+    assert (best_d[rows] < np.inf).any()
+    for k in range(len(rows)):
+        order = np.argsort(full[k], kind="stable")[:KNN_K]
+        want = {(int(cols[o]), float(full[k, o])) for o in order if full[k, o] < thr[k]}
+        got = {(int(c), float(d)) for c, d in zip(best_c[k], best_d[k]) if d < thr[k]}
+        assert got == want

@@ -45,23 +45,33 @@ class RssMatrix:
     def block(self, rows: np.ndarray | slice, cols: np.ndarray | slice | None = None):
         """(d, common) for rows x cols: eq. 9 distance (dB, float32) and number of shared APs."""
         cols = slice(None) if cols is None else cols
-        # the same float64 operations in the same order as the plain expression
+        dot, common = self.products(rows, cols)
+        return self.distance(self.cnt[rows][:, None], self.cnt[cols][None, :], self.sq[rows][:, None],
+                             self.sq[cols][None, :], dot, common), common
+
+    def products(self, rows: np.ndarray | slice, cols: np.ndarray | slice):
+        """(dot, common) for rows x cols: the float32 products eq. 9 is computed from."""
+        return self.a[rows] @ self.a[cols].T, self.b[rows] @ self.b[cols].T
+
+    @staticmethod
+    def distance(cnt_r, cnt_c, sq_r, sq_c, dot, common) -> np.ndarray:
+        """Eq. 9 distance (dB, float32) from the products (``dot`` is overwritten), the rows' and columns' AP
+        counts and squared norms broadcast against them: a block (rows as columns, columns as rows) or
+        entries picked from one, each entry by the same float64 operations in the same order."""
         # sqrt(max(sq_r + sq_c - 2 dot, 0) / max(cnt_r + cnt_c - common, 1)), in place: the temporaries
         # of a (rows x n) block dominated the pair search's and the placement's time at 150k poses
-        dot = self.a[rows] @ self.a[cols].T
-        common = self.b[rows] @ self.b[cols].T
-        union = np.add.outer(self.cnt[rows], self.cnt[cols])
+        union = cnt_r + cnt_c
         union -= common
         np.maximum(union, 1, out=union)
         dot *= 2.0
-        sq = np.add.outer(self.sq[rows], self.sq[cols])
+        sq = sq_r + sq_c
         sq -= dot
         del dot
         np.maximum(sq, 0, out=sq)
         sq /= union
         del union
         np.sqrt(sq, out=sq)
-        return sq.astype(np.float32), common
+        return sq.astype(np.float32)
 
     def block_sq32(self, rows: np.ndarray, cols: np.ndarray):
         """(d², common) for rows x cols in float32: the squared eq. 9 distance (dB²) with float32

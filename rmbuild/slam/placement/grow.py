@@ -34,6 +34,10 @@ MAX_ROUNDS = 100
 KNN_K = 3
 # rows per block of the kNN distance products
 KNN_BLOCK_ROWS = 2048
+# the kNN merge's float32 screen keeps an entry whose squared distance may be within (1 + SCREEN_REL) times
+# the bound squared plus SCREEN_ABS_DB2 (dB²) of it: float32 rounding of its terms (~1e5 dB²) is ~0.05 dB²
+SCREEN_REL = 1e-3
+SCREEN_ABS_DB2 = 1.0
 # sigmas; a placed walk whose refined rotation is further than this from its compass rotation has an
 # unreliable compass: its heading priors are dropped
 HEADING_OUTLIER_SIGMAS = 4.0
@@ -69,6 +73,41 @@ def leftovers(st: GrowState, rot: RotationPriors, c_id: int) -> None:
 def _distrust_outliers(st: GrowState, placed: np.ndarray, prior: np.ndarray, sig: np.ndarray) -> None:
     off = np.abs(geometry.wrap(st.T[:, 2] - prior)) > HEADING_OUTLIER_SIGMAS * sig
     st.heading_used &= ~(placed & np.isfinite(prior) & off)
+
+
+def _within(rss, rows: np.ndarray, cols: np.ndarray, dot: np.ndarray, common: np.ndarray, bound: np.ndarray,
+            min_common: int) -> tuple[np.ndarray, np.ndarray]:
+    """Entries (i, j) of the rows x cols block with ``min_common`` shared APs whose eq. 9 distance may be at
+    most ``bound[i]``: a float32 screen of sq_r + sq_c - 2 dot <= bound² union, loose by SCREEN_REL and
+    SCREEN_ABS_DB2 (far more than float32 rounding), so that every entry within the bound is kept."""
+    lim = np.add.outer(rss.cnt[rows].astype(np.float32), rss.cnt[cols].astype(np.float32))
+    lim -= common
+    np.maximum(lim, 1, out=lim)
+    lim *= (np.square(bound, dtype=np.float32) * np.float32(1 + SCREEN_REL))[:, None]
+    lim += np.float32(SCREEN_ABS_DB2)
+    lim += dot
+    lim += dot
+    lim -= rss.sq[rows].astype(np.float32)[:, None]
+    ok = lim >= rss.sq[cols].astype(np.float32)[None, :]
+    del lim
+    ok &= common >= min_common
+    i, j = np.nonzero(ok)
+    return i, j
+
+
+def _keep_nearest(best_d: np.ndarray, best_c: np.ndarray, rows: np.ndarray, i: np.ndarray, c: np.ndarray,
+                  d: np.ndarray) -> None:
+    """Merge candidates (row ``rows[i]``, column ``c``, distance ``d``) into each row's KNN_K nearest (in
+    place), kept in order of distance (then column)."""
+    k = best_d.shape[1]
+    rr = np.r_[np.repeat(np.arange(len(rows)), k), i]
+    dd = np.r_[best_d[rows].ravel(), d]
+    cc = np.r_[best_c[rows].ravel(), c]
+    o = np.lexsort((cc, dd, rr))
+    rank = np.arange(len(o)) - np.searchsorted(rr[o], rr[o])
+    top = o[rank < k]
+    best_d[rows] = dd[top].reshape(-1, k)
+    best_c[rows] = cc[top].reshape(-1, k)
 
 
 Fit = Callable[[float | None], WalkFit | None]
@@ -267,27 +306,29 @@ class ScanEvidence(GrowthEvidence):
         return fit_to_scans(p_own, x_hat, path, rot, self.cfg, self.rng)
 
     def _merge_neighbours(self, new_walks: list, free: np.ndarray) -> None:
-        """Merge the newly placed walks' scans into every unplaced scan's KNN_K nearest."""
+        """Merge the newly placed walks' scans into every unplaced scan's KNN_K nearest within its threshold
+        (only those are ever used: a neighbour further than the threshold does not cover the scan)."""
         new_rows = np.concatenate([self.rows_of[w] for w in new_walks]) if new_walks else np.zeros(0, np.int64)
         u_rows = np.flatnonzero(free[self.row_walk])
         if not (len(new_rows) and len(u_rows)):
             return
         # fewer rows per block against many new scans: a block's temporaries stay ~BLOCK_ELEMS entries
-        # (2,048 rows x 30,000 new scans took 3 GB at 150k poses); the column of each kept entry is read
-        # from the old best or from new_rows instead of a (rows x columns) int64 matrix of candidates
         step = max(16, min(KNN_BLOCK_ROWS, BLOCK_ELEMS // len(new_rows)))
         for b0 in range(0, len(u_rows), step):
-            ur = u_rows[b0:b0 + step]
-            d, common = self.sim.rss.block(ur, new_rows)
-            d[common < self.sim.min_common] = np.inf
-            del common
-            dd = np.concatenate([self.best_d[ur], d], axis=1)
-            del d
-            kk = min(KNN_K, dd.shape[1])
-            idx = np.argpartition(dd, kk - 1, axis=1)[:, :kk]
-            old = np.take_along_axis(self.best_c[ur], np.minimum(idx, KNN_K - 1), axis=1)
-            self.best_d[ur, :kk] = np.take_along_axis(dd, idx, axis=1)
-            self.best_c[ur, :kk] = np.where(idx < KNN_K, old, new_rows[np.maximum(idx - KNN_K, 0)])
+            self._merge_block(u_rows[b0:b0 + step], new_rows)
+
+    def _merge_block(self, ur: np.ndarray, new_rows: np.ndarray) -> None:
+        """One block of :meth:`_merge_neighbours`: the float32 products of ``ur`` x ``new_rows``, eq. 9's
+        float64 distance only for the entries a screen keeps (:func:`_within`), merged in distance order."""
+        rss = self.sim.rss
+        bound = np.minimum(self.thr[ur], self.best_d[ur, KNN_K - 1])
+        dot, common = rss.products(ur, new_rows)
+        i, j = _within(rss, ur, new_rows, dot, common, bound, self.sim.min_common)
+        r, c = ur[i], new_rows[j]
+        d = rss.distance(rss.cnt[r], rss.cnt[c], rss.sq[r], rss.sq[c], dot[i, j], common[i, j])
+        del dot, common
+        ok = d <= bound[i]
+        _keep_nearest(self.best_d, self.best_c, ur, i[ok], c[ok], d[ok])
 
     def round(self, st, placed, free, prior, c_id, r, log) -> list:
         self._merge_neighbours(self._new_walks, free)
