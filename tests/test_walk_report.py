@@ -109,6 +109,25 @@ def test_unlinked_warning_names_the_groups_of_unlinked_walks():
     assert unlinked_warning(walks, table, 0, plan_used=False) is None
 
 
+def test_uncertain_placement_warning_fires_on_the_median_predicted_error_of_linked_walks():
+    """The warning reads the linked walks' predicted errors only: a median above DOUBTFUL_MEDIAN_ERROR_M fires
+    it (with the count over 8 m), a lower one or unlinked walks' large errors do not; too few walks, none."""
+    import pandas as pd
+
+    from rmbuild.slam.report import DOUBTFUL_MEDIAN_ERROR_M, uncertain_placement_warning
+
+    table = pd.DataFrame({"linked": [True, True, True, True, False],
+                          "predicted_error_m": [2.0, 3.0, 4.0, 12.0, 40.0]})
+    assert uncertain_placement_warning(table) is None  # median 3.5 m; the unlinked 40 m is not counted
+    table["predicted_error_m"] = [6.0, 9.0, 12.0, 3.0, np.nan]
+    line = uncertain_placement_warning(table)
+    assert line is not None and line.startswith("the linked walks' median predicted error is 7.5 m (2 of 4 over 8 m)")
+    assert "--anchors" in line
+    table["predicted_error_m"] = [DOUBTFUL_MEDIAN_ERROR_M] * 4 + [np.nan]
+    assert uncertain_placement_warning(table) is None  # at the threshold: not above it
+    assert uncertain_placement_warning(table.iloc[:1].assign(predicted_error_m=30.0)) is None  # one walk
+
+
 def test_every_walk_says_why_it_is_placed_or_left_out():
     """The walk table's reason names the evidence of each kind of placement; a merge or continuity join
     names the group it moved (from the placement's log), a walk left out says so."""

@@ -117,8 +117,9 @@ def optimize(
     pairs = wifi.pairs_table(final_xyt)
     walks_df = report.walk_table(walks, placement, pairs, checks, outcome, final_xyt, gather(sources, walks)[3])
     plan_used = any(s.name == "floorplan" and getattr(s, "used", False) for s in sources)
-    line = report.unlinked_warning(walks, walks_df, placement.reference, plan_used)
-    warnings += [line] if line else []
+    lines = (report.unlinked_warning(walks, walks_df, placement.reference, plan_used),
+             report.uncertain_placement_warning(walks_df[walks.keep]))
+    warnings += [line for line in lines if line]
     if placement.refuted:
         warnings.append(f"{len(placement.refuted)} walk(s) left unplaced: where the Wi-Fi fit put them the radio "
                         "disagrees with the walks already there (RF check): "

@@ -158,6 +158,30 @@ def placement_summary(table: pd.DataFrame) -> dict:
     return out
 
 
+#: m; a map whose linked walks' median predicted error exceeds this is said to be uncertain. Chosen across the
+#: real floors and synthetic venues measured (docs/notes/placement-precision.md): every venue with 83-100 % of
+#: its linked walks within 8 m of the truth had a median of 2.6-4.3 m, every floor with 29-70 % one of
+#: 6.7-18.3 m; any value between makes the same call on each of them left out
+DOUBTFUL_MEDIAN_ERROR_M = 5.5
+#: m; a walk "placed right" lies within this of the truth (the measure of the notes): counted in the warning
+RIGHT_M = 8.0
+
+
+def uncertain_placement_warning(table: pd.DataFrame) -> str | None:
+    """One line when the linked walks' median predicted error exceeds DOUBTFUL_MEDIAN_ERROR_M (None otherwise):
+    on such floors whole groups of walks were found misplaced together, which no single walk's figures show."""
+    pred = table.loc[table["linked"].to_numpy(bool), "predicted_error_m"].to_numpy(float)
+    pred = pred[np.isfinite(pred)]
+    med = float(np.median(pred)) if len(pred) >= 2 else 0.0
+    if med <= DOUBTFUL_MEDIAN_ERROR_M:
+        return None
+    return (f"the linked walks' median predicted error is {med:.1f} m ({int((pred > RIGHT_M).sum())} "
+            f"of {len(pred)} over {RIGHT_M:.0f} m): with evidence this weak, whole groups of walks can sit tens of "
+            "metres from where they were walked and the Wi-Fi does not show it; check the map against a few known "
+            "positions in each region of the floor (`optimize --anchors FILE`) and rely on walks by their predicted "
+            "error (optimize/walks.parquet: predicted_error_m, reason)")
+
+
 def unlinked_warning(walks: WalkSet, table: pd.DataFrame, reference: int, plan_used: bool) -> str | None:
     """One line naming the walks not linked to the reference walk (None when every kept walk is); a floor
     plan is suggested only when none was used."""
