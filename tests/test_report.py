@@ -163,14 +163,19 @@ def test_walk_colours_stay_distinct_past_twenty_walks() -> None:
 
     ids = [f"w{i:03d}" for i in range(25)]
     walks = pd.DataFrame({"walk_id": ids, "linked": [i != 3 for i in range(25)],
-                          "predicted_error_m": [float(i) for i in range(25)]})
+                          "predicted_error_m": [i / 2 for i in range(25)]})
     style = walk_style(ids, walks)
-    assert style.colorbar is not None and style.colorbar[1:3] == (0.0, 24.0)
+    assert style.colorbar is not None and style.colorbar[1:3] == (0.0, 12.0)
     top = matplotlib.colormaps[WALK_VALUE_CMAP](1.0)[:3]
     assert style.rgb["w024"] == pytest.approx(top) and "w003" not in style.rgb
     assert [label for label, _ in style.legend] == ["grey: not linked, not in the map (w003)"]
     few = walk_style(ids[:20], walks.iloc[:20])
     assert few.colorbar is None and len(set(few.rgb.values())) == len(few.rgb) == 19
+    walks["predicted_error_m"] = [float(i) for i in range(24)] + [900.0]  # the scale stops at 16 m
+    capped = walk_style(ids, walks)
+    assert capped.colorbar is not None and capped.colorbar[1:3] == (0.0, 16.0) and "16 m or more" in capped.colorbar[3]
+    assert capped.rgb["w024"] == pytest.approx(top) and capped.rgb["w020"] == pytest.approx(top)
+    assert capped.rgb["w004"] != capped.rgb["w008"] != capped.rgb["w012"]
 
 
 def test_colour_maps_are_colour_blind_safe() -> None:

@@ -92,6 +92,11 @@ def walk_panels(ds: Any, opt: pd.DataFrame | None, walks: pd.DataFrame | None, g
     return out
 
 
+#: m; the predicted-error colour scale ends here (twice the 8 m a walk placed right lies within): past it a
+#: walk is as doubtful as can be shown
+ERROR_SCALE_TOP_M = 16.0
+
+
 def walk_style(walk_order: list[str], walks: pd.DataFrame | None) -> figures.WalkStyle:
     """Colours that stay distinct: one palette colour per walk up to the palette's size (20); past it,
     optimize's predicted placement error on a colour-blind-safe scale (without optimize: the walk order).
@@ -127,7 +132,11 @@ def _by_value(placed: list[str], walks: pd.DataFrame | None
         label = "walk (input order)"
     finite = values[np.isfinite(values)]
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-    cmap, norm = matplotlib.colormaps[WALK_VALUE_CMAP], Normalize(lo, hi if hi > lo else lo + 1.0)
+    if label.startswith("optimize") and hi > ERROR_SCALE_TOP_M:  # a few walks hundreds of metres off would
+        hi = ERROR_SCALE_TOP_M                                    # leave every other walk one colour
+        lo = min(lo, hi / 2)
+        label = f"optimize's predicted placement error (m; top colour: {ERROR_SCALE_TOP_M:.0f} m or more)"
+    cmap, norm = matplotlib.colormaps[WALK_VALUE_CMAP], Normalize(lo, hi if hi > lo else lo + 1.0, clip=True)
     rgb = {w: tuple(float(c) for c in cmap(norm(v))[:3]) if np.isfinite(v) else (0.45, 0.45, 0.45)
            for w, v in zip(placed, values)}
     return rgb, (WALK_VALUE_CMAP, lo, hi, label)  # type: ignore[return-value]
