@@ -253,3 +253,19 @@ def test_report_out_writes_everything_beside_the_page(ws_report: Path, tmp_path:
     assert "walks.png" in figs and "coverage.png" in figs
     r = run_cli(capsys, "report", "-w", ws, "--out", out)
     assert r.code == 2 and "--force" in r.err
+
+
+def test_walk_table_puts_the_doubtful_linked_walks_first() -> None:
+    """Linked walks by predicted error, largest first (one without a figure last of them), then the walks
+    left out in their order; every walk once."""
+    import pandas as pd
+
+    from rmbuild.viz.walk_table import walk_rows
+
+    walks = pd.DataFrame({"walk_id": ["a", "b", "c", "d", "e", "f"],
+                          "linked": [True, False, True, True, False, True],
+                          "predicted_error_m": [2.0, float("nan"), 9.5, float("nan"), float("nan"), 4.0],
+                          "placement": ["reference", "", "merge", "translation", "", "translation"]})
+    _, rows = walk_rows(walks, None)
+    assert [r[0] for r in rows] == ["c", "f", "a", "d", "b", "e"]
+    assert [r[1] for r in rows] == ["yes"] * 4 + ["no"] * 2

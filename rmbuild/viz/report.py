@@ -215,7 +215,8 @@ def _walks_html(ws: Workspace, ds: Any, rt: Any, gauge: str | None) -> str:
     errors = real_errors(ws.read_table("optimize.poses"), ds, rt, gauge)
     header, rows = walk_rows(walks, errors)
     n_linked = sum(r[1] == "yes" for r in rows)
-    note = ("Placed by: how optimize put the walk in the map (Wi-Fi pairs, continuity with the previous "
+    note = ("The linked walks first, the largest predicted error on top, then the walks left out. "
+            "Placed by: how optimize put the walk in the map (Wi-Fi pairs, continuity with the previous "
             "recording, ...); shared path: length of path it shares with other walks by Wi-Fi; predicted "
             "error: optimize's own estimate of how far off its placement is; why: the evidence that placed the walk "
             "or the reason it was left out")

@@ -66,13 +66,14 @@ def real_errors(opt: pd.DataFrame, ds: Any, rt: Any, gauge: str | None) -> tuple
 
 def walk_rows(walks: pd.DataFrame, errors: tuple[str, dict[str, float]] | None
               ) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
-    """(header, rows) of the table from ``optimize/walks.parquet``; the real error column only with
-    ``errors`` (an unlinked walk's real error is left out: its frame is arbitrary); the walk's ``reason``
-    last when the table has one."""
+    """(header, rows) of the table from ``optimize/walks.parquet``: the linked walks first, the largest
+    predicted error first (the walks to doubt on top), then the walks left out, each group in walk order;
+    the real error column only with ``errors`` (an unlinked walk's real error is left out: its frame is
+    arbitrary); the walk's ``reason`` last when the table has one."""
     why = "reason" in walks  # optimize's sentence on the evidence (workspaces from before it have none)
     header = HEADER + ((errors[0],) if errors else ()) + (("why",) if why else ())
     rows: list[tuple[str, ...]] = []
-    for _, r in walks.iterrows():
+    for _, r in _doubtful_first(walks).iterrows():
         wid = str(r["walk_id"])
         linked = bool(r.get("linked", True))
         row: tuple[str, ...] = (wid, "yes" if linked else "no", _placed_by(r), _num(r.get("shared_path_m"), 0),
@@ -83,3 +84,14 @@ def walk_rows(walks: pd.DataFrame, errors: tuple[str, dict[str, float]] | None
             row += (str(r["reason"]),)
         rows.append(row)
     return header, rows
+
+
+def _doubtful_first(walks: pd.DataFrame) -> pd.DataFrame:
+    """The linked walks by predicted error, largest first (a walk without one last among them), then the
+    others; ties and each group keep the walks' order."""
+    linked = walks["linked"].astype(bool) if "linked" in walks else pd.Series(True, index=walks.index)
+    pred = walks["predicted_error_m"].astype(float) if "predicted_error_m" in walks else \
+        pd.Series(float("nan"), index=walks.index)
+    key = pd.DataFrame({"group": (~linked).astype(int), "pred": -pred.fillna(-float("inf")),
+                        "order": range(len(walks))}, index=walks.index)
+    return walks.loc[key.sort_values(["group", "pred", "order"], kind="stable").index]
