@@ -123,7 +123,8 @@ def _by_value(placed: list[str], walks: pd.DataFrame | None
     import matplotlib
     from matplotlib.colors import Normalize
 
-    if walks is not None and "predicted_error_m" in walks:
+    by_error = walks is not None and "predicted_error_m" in walks
+    if walks is not None and by_error:
         pred = walks.set_index(walks["walk_id"].astype(str))["predicted_error_m"].astype(float)
         values = np.array([pred.get(w, np.nan) for w in placed], dtype=float)
         label = "optimize's predicted placement error (m)"
@@ -132,7 +133,7 @@ def _by_value(placed: list[str], walks: pd.DataFrame | None
         label = "walk (input order)"
     finite = values[np.isfinite(values)]
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-    if label.startswith("optimize") and hi > ERROR_SCALE_TOP_M:  # a few walks hundreds of metres off would
+    if by_error and hi > ERROR_SCALE_TOP_M:  # a few walks hundreds of metres off would
         hi = ERROR_SCALE_TOP_M                                    # leave every other walk one colour
         lo = min(lo, hi / 2)
         label = f"optimize's predicted placement error (m; top colour: {ERROR_SCALE_TOP_M:.0f} m or more)"

@@ -90,8 +90,7 @@ def _doubtful_first(walks: pd.DataFrame) -> pd.DataFrame:
     """The linked walks by predicted error, largest first (a walk without one last among them), then the
     others; ties and each group keep the walks' order."""
     linked = walks["linked"].astype(bool) if "linked" in walks else pd.Series(True, index=walks.index)
-    pred = walks["predicted_error_m"].astype(float) if "predicted_error_m" in walks else \
-        pd.Series(float("nan"), index=walks.index)
-    key = pd.DataFrame({"group": (~linked).astype(int), "pred": -pred.fillna(-float("inf")),
-                        "order": range(len(walks))}, index=walks.index)
-    return walks.loc[key.sort_values(["group", "pred", "order"], kind="stable").index]
+    pred = walks["predicted_error_m"].astype(float) if "predicted_error_m" in walks else np.nan
+    key = pd.DataFrame({"left_out": ~linked, "pred": pred}, index=walks.index)
+    order = key.sort_values(["left_out", "pred"], ascending=[True, False], na_position="last", kind="stable")
+    return walks.loc[order.index]
